@@ -271,3 +271,42 @@ def test_a_worker_whose_own_default_model_is_another_build_is_sent_the_model(
     with pytest.raises(BatchError, match=r"default\.npz holds another model now .*: this "
                                          r"machine's own default model, another build"):
         MR.worker_model(elsewhere)
+
+
+def test_a_model_file_only_touched_or_copied_again_is_still_sent_as_its_path(
+        clips, quick_model, tmp_path, monkeypatch):
+    """A model file whose modification time changed after the run loaded it, its content the
+    same (touched: a backup tool, ``touch``; or the same model copied onto it again) was taken
+    for another file: the model was sent whole to every worker (``client.scatter``: the
+    default model's 0.45 GB pickled to each, lost with a worker under the active memory
+    manager), in silence. The file is now judged by its content: the workers get its path and
+    load it; a file written over with another model is still not taken for the run's."""
+    from facetransfer.batch import batch_track, cluster, open_client
+    from facetransfer.batch.manifest import ClipJob
+    from facetransfer.model import load_model
+
+    p = quick_model.save(tmp_path / "m.npz")
+    model = load_model(p)
+    ref = MR.ModelRef(str(p.absolute()), model.content_hash, False)
+    st = p.stat()
+    os.utime(p, ns=(st.st_atime_ns, st.st_mtime_ns + 10 ** 9))      # touched
+    assert MR.model_ref(model) == ref
+    sent = []
+    monkeypatch.setattr(cluster, "scatter_model", lambda c, m: sent.append(m))
+    monkeypatch.setattr(MR, "_LOADED", type(MR._LOADED)())
+    (va, pa, _) = clips["a"]
+    with open_client(workers=1, processes=False) as client:
+        res = batch_track([ClipJob("a", str(va), init=str(pa))], tmp_path / "out", model,
+                          client=client)
+    assert [(r.status, r.error) for r in res.rows] == [("done", "")] and sent == []
+
+    same = p.read_bytes()
+    other = dataclasses.replace(model, provenance={"note": "another"}).save(
+        tmp_path / "other.npz").read_bytes()
+    for data, want in ((same, ref), (other, None)):                  # cp X m.npz: in place
+        with open(p, "r+b") as fh:
+            fh.write(data)
+            fh.truncate()
+        st = p.stat()
+        os.utime(p, ns=(st.st_atime_ns, st.st_mtime_ns + 10 ** 9))
+        assert MR.model_ref(model) == want

@@ -207,3 +207,38 @@ def test_occluders_name_a_plate_s_frames_by_its_numbers(plate, arkit_model, monk
                              "--out", plate["dir"] / "occ.npz", "--no-progress"])
     assert code == 0, err
     assert "note: covered: mouth in frames 1011-1013 (" in said, said
+
+
+def test_an_older_tracks_first_number_is_the_exports_rule(quick_model, tmp_path):
+    """A track made before tracks recorded their clip's numbering (no ``source_facts``) is
+    numbered by one rule in the messages (``track_first_number``, what ``probe``, ``edit --add``
+    and ``--neutral`` use) and in the exports (``export.usd.source_first_frame``,
+    ``export.common.clip_facts``): its plate's first number where the plate at its ``source``
+    is still its clip (of its frame size); 0 where another plate now lies there (before: the
+    messages took that plate's 2001, the USD 0) or none does (the plate moved)."""
+    from conftest import still_track
+
+    from facetransfer.export.common import clip_facts
+    from facetransfer.export.usd import source_first_frame
+    from facetransfer.io.frame_numbers import track_first_number
+    from facetransfer.io.source_facts import SourceFacts
+
+    for name, size, first in (("same", 64, 1001), ("other", 32, 2001)):
+        (tmp_path / name).mkdir()
+        for k in range(first, first + 3):
+            cv2.imwrite(str(tmp_path / name / f"sh.{k}.png"), np.full((size, size, 3), 90,
+                                                                     np.uint8))
+    cases = {"same": 1001, "other": 0, "moved": 0}
+    for name, want in cases.items():
+        old = still_track(quick_model, 3, source=str(tmp_path / name / "sh.####.png"))
+        assert old.source_facts is None
+        got = (track_first_number(old), source_first_frame(old), clip_facts(old)[0].first_frame)
+        assert got == (want, want, want), name
+    # a recorded numbering is the track's, whatever is at its source now
+    kept = dataclasses.replace(still_track(quick_model, 3,
+                                           source=str(tmp_path / "other" / "sh.####.png")),
+                               source_facts=SourceFacts(1001, None))
+    assert track_first_number(kept) == source_first_frame(kept) == 1001
+    # a video's track: 0 by both, nothing read
+    video = still_track(quick_model, 3, source=str(tmp_path / "clip.mp4"))
+    assert track_first_number(video) == source_first_frame(video) == 0

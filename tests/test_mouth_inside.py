@@ -209,3 +209,75 @@ def test_a_target_with_cuts_measures_its_inside_over_the_whole_clip(quick_model,
                              options=rc.RewriteOptions(mouth="frame")))
     assert len(seen) == 2                                   # one renderer a shot
     assert all(s == (n, n, list(range(n))) for s in seen), seen
+
+
+def _teeth_halves(model, yaw: float) -> tuple[int, int]:
+    """``(near, far)``: the upper teeth's pixels (luminance over 130: the teeth facing the light
+    are 185, the lips 114, the cavity 32) that :func:`paint_inside` draws into the mean person's
+    opening (jawOpen 0.7, turned ``yaw`` degrees about the vertical), on the camera's side of
+    the upper lip's middle and beyond it."""
+    from scipy.spatial.transform import Rotation
+
+    from conftest import jaw_open_track
+    from facetransfer.mouth import inside_mouth
+    from facetransfer.mouth_inside import DrawnInside, paint_inside
+    from facetransfer.render import rasterize
+    from facetransfer.topology import close_mouth, mesh_topology
+
+    lm = np.asarray(model.landmarks)
+    track = jaw_open_track(model, [0.7], rotation=Rotation.from_euler("y", yaw, degrees=True)
+                           .as_matrix(), scale=30.0)
+    topo = mesh_topology(model)
+    V = close_mouth(model.synthesize(track.weights_at(0)), topo)
+    cam = track.camera(0)
+    c = cam.project(V[-1:])[0]
+    cam = cam.shifted(c[0] - 128.0, c[1] - 128.0)              # the mouth in the middle
+    raster = rasterize(V, topo.faces, cam, (256, 256))
+    fan = inside_mouth(raster.tri_id, topo)
+    img = np.empty((256, 256, 3), np.uint8)
+    img[:] = LIPS
+    inside = DrawnInside(0.0, np.array([60.0, 22, 20]), np.array([102.0, 54, 54]),
+                         np.array([190.0, 185, 170]), lm[[60, 64]], lm[[36, 39, 42, 45]])
+    assert paint_inside(img, raster, V, cam, topo, inside, fan) == 1.0
+    loop = V[topo.mouth_loop]
+    upper = loop[loop[:, 1] > loop[:, 1].mean()]
+    middle = upper[np.argmin(np.abs(upper[:, 0] - 0.5 * (loop[:, 0].min() + loop[:, 0].max())))]
+    x = cam.project(middle[None])[0, 0]
+    ys, xs = np.nonzero(fan)
+    teeth = img[ys, xs] @ LUMA > 130
+    side = np.sign(cam.rotation[0, 2]) or 1.0     # the far side: where the head's +z turns to
+    far = (xs - x) * side > 0
+    return int(np.sum(teeth & ~far)), int(np.sum(teeth & far))
+
+
+@pytest.mark.parametrize("yaw", [30.0, -30.0])
+def test_a_turned_heads_teeth_follow_the_dental_arch(arkit_model, yaw):
+    """On a head turned 30°, the teeth are drawn on the dental arch behind the lips seen along
+    the camera's view: the far side's teeth, on the arch's side turned away, are foreshortened.
+    Their pixels beyond the upper lip's middle are 0.55 and 0.61 of the near side's (the arch
+    ``z = -0.81 x²`` at the teeth's half-width, 0.46 eye widths, projects to 0.65); the
+    flat band painted on the opening's surface (a cone whose far half recedes out of view) drew
+    0.15-0.18 there. Facing the camera, the two sides are alike (515 and 496 pixels)."""
+    near, far = _teeth_halves(arkit_model, yaw)
+    assert near > 400
+    assert 0.4 < far / near < 0.85
+    n0, f0 = _teeth_halves(arkit_model, 0.0)
+    assert n0 > 400 and abs(n0 - f0) < 0.03 * (n0 + f0)
+
+
+def test_the_drawn_teeth_are_as_bright_over_the_skin_as_real_teeth():
+    """The drawn teeth's luminance over the skin's is the median of what real teeth show
+    (:data:`facetransfer.mouth_inside.TEETH_LEVEL`: 1.55, 1.48, 1.35, 0.85, 0.67 measured):
+    on a face darkened to takeo's 0.35 (skin 33) the teeth are 1.35 times its luminance, at
+    least the 1.35 of the dimmest real source whose upper teeth show lit (``driving_d6``;
+    before, 1.25: under all three); one gain, the palette's hue kept, and a bright skin's
+    teeth clipped at white."""
+    from facetransfer.mouth_inside import _colours
+    from facetransfer.palette import PALETTE
+
+    skin, lips = np.array([36.0, 32.0, 29.0]), np.array([40.0, 25.0, 25.0])
+    teeth = _colours(skin, lips, lips * 0.5)[2]
+    assert 1.34 < (teeth @ LUMA) / (skin @ LUMA) < 1.36
+    palette = np.asarray(PALETTE["teeth"], np.float64)
+    assert np.allclose(teeth / (teeth @ LUMA), palette / (palette @ LUMA))
+    assert np.all(_colours(skin * 6.5, lips, lips)[2] <= 255.0)

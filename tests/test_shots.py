@@ -182,6 +182,37 @@ def test_a_chunk_after_a_cut_it_cannot_see_gets_its_own_identity(edited, arkit_m
     assert np.allclose(other.weights["identity"], alone.weights["identity"])
 
 
+def test_a_cut_inside_a_later_chunk_is_named_by_the_clips_frame_numbers(edited, arkit_model,
+                                                                       tmp_path, caplog):
+    """``batch track --chunk`` of a plate numbered from 1001 whose cut is at its frame 1041:
+    the chunk of frames 1026-1055 (rows 25-54) says the cut at 1041, as ``track`` of the whole
+    plate does (before: 1016, counted from the chunk's own first frame as if it were the
+    plate's first); a later chunk with no face names the frames it searched by the clip's
+    numbers too."""
+    from facetransfer.batch import jobs as J
+    from facetransfer.batch.chunks import Chunk
+    from facetransfer.batch.manifest import ClipJob
+    from facetransfer.errors import VideoError
+    from facetransfer.track.settings import TrackerSettings
+
+    a, b = edited
+    (tmp_path / "plate").mkdir()
+    for k, f in enumerate(np.concatenate([a, b]), start=1001):
+        cv2.imwrite(str(tmp_path / "plate" / f"e.{k}.png"), f[..., ::-1])
+    job = ClipJob("edited", str(tmp_path / "plate" / "e.####.png"))
+    out, opt = str(tmp_path / "e.npz"), TrackerSettings()
+    first = J.track_chunk(job, Chunk(0, 0, 25), out, arkit_model, opt)
+    with caplog.at_level("WARNING"):
+        cut = J.track_chunk(job, Chunk(1, 25, 55), out, arkit_model, opt, first).track
+    assert cut.shot_starts == (15,)                 # the chunk's row 15: the clip's row 40
+    assert "cuts to another shot at frame 1041:" in caplog.text, caplog.text
+    for k in range(1056, 1066):                      # a chunk of grey frames: no face
+        cv2.imwrite(str(tmp_path / "plate" / f"e.{k}.png"), np.full((480, 480, 3), 128, np.uint8))
+    with pytest.raises(VideoError, match=r"no face found in .*e\.####\.png \(searched frames "
+                                         r"1056-1065\)"):
+        J.track_chunk(job, Chunk(2, 55, 65), out, arkit_model, opt, first)
+
+
 def test_one_persons_shots_share_an_identity_and_a_gap_holds_its_nearest_frames(
         edited, arkit_model, caplog):
     """The same person before and after 12 black frames (a cut to black and back): one

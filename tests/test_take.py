@@ -818,3 +818,32 @@ def test_a_take_exports_as_glb_or_json(arkit_model, make_arkit_track, tmp_path, 
                          "is a take, of no video")):
         code = main([str(x) for x in ["export", take, "--model", model, *extra]])
         assert code == 2 and said in capsys.readouterr().err
+
+
+def test_a_take_onto_a_plate_from_1001_starts_at_its_first_frame_and_says_the_rates(
+        arkit_model, make_arkit_track, tmp_path, caplog):
+    """A take onto a plate numbered from 1001 that stores no timecode (PNG) is placed from its
+    first row at the plate's first frame, 1001: the plate's numbers are not a timecode (a take
+    whose first row reads 00:00:41:17, frame 1001 at 24 fps, is placed as one from 00:00:00:00).
+    Where it ends early because its rows run at 30 a second on a plate read at 24 fps (a PNG
+    plate's default rate), the warning says both rates (before: only the frames, which read
+    as if the take were placed six rows ahead)."""
+    import dataclasses
+
+    from facetransfer.export.livelink import write_livelink
+    from facetransfer.io.source_facts import SourceFacts
+
+    track, a, _ = make_arkit_track(arkit_model, 30, fps=30.0)
+    plain = write_livelink(track, tmp_path / "take.csv", labels="clip")
+    late = write_livelink(track, tmp_path / "late.csv", start="00:00:33:11", labels="clip")
+    target, _, _ = make_arkit_track(arkit_model, 30, seed=5, identity=2, fps=24.0)
+    plate = dataclasses.replace(target, source="plate/sh.####.png",
+                                source_facts=SourceFacts(1001, None))
+    with caplog.at_level("WARNING", logger="facetransfer.take"):
+        onto = take_performance(plain, plate, arkit_model)
+    moved = take_performance(late, plate, arkit_model)
+    np.testing.assert_allclose(onto.blendshapes[0], a[0], atol=1e-6)     # row 0 at 1001
+    np.testing.assert_allclose(onto.blendshapes[4], a[5], atol=1e-6)     # 4/24 s: row 5
+    np.testing.assert_allclose(moved.blendshapes, onto.blendshapes, atol=1e-9)
+    assert ("ends at the target's frame 1024 (its rows 30 a second, the target's frames 24): "
+            "its last row is held on frames 1025-1030") in caplog.text, caplog.text

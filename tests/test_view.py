@@ -110,6 +110,33 @@ def _saved_face(page: Path, fragment: str, out: Path) -> Path:
 
 
 @pytest.mark.slow
+def test_a_plates_page_takes_and_saves_the_plates_frame_numbers(arkit_model, pages, tmp_path):
+    """The page of a plate's track (numbered from 1001) takes ``#frame=1004`` as the plate's
+    frame 1004 (its row 3), shows 1004 and saves ``"frame": 1004`` with row 3's face (before:
+    1004 was past the 8 rows, read as the last one, and the saved frame was the row); an older
+    page's address, which kept the row (``#frame=3``), still names that frame, as no frame of
+    the plate is numbered so low. A video's track keeps its rows (``test_a_saved_face...``)."""
+    from facetransfer.arkit import weights_to_activations
+    from facetransfer.face_file import face_weights, read_face
+    from facetransfer.io.source_facts import SourceFacts
+
+    _, _, track, a = pages
+    plate = dataclasses.replace(track, source="plate/sh.####.png",
+                                source_facts=SourceFacts(1001, None))
+    plate.save(tmp_path / "plate.npz")
+    page = write_viewer(tmp_path / "plate.npz", tmp_path / "plate.html", model=arkit_model)
+    for address in ("frame=1004", "frame=3"):
+        assert '<span id="frameno">1004</span>' in _dom(page, address), address
+        face = read_face(_saved_face(page, address, tmp_path / "p.json"))
+        assert face.frame == 1004, address
+        w = face_weights(face, arkit_model)["expression"]
+        np.testing.assert_allclose(weights_to_activations(arkit_model, w[None])[0], a[3],
+                                   atol=2e-6)
+    face = read_face(_saved_face(page, "frame=1008", tmp_path / "last.json"))
+    assert face.frame == 1008          # the plate's last frame, row 7
+
+
+@pytest.mark.slow
 def test_a_saved_face_is_the_pages_face(arkit_model, pages, tmp_path):
     """The dial editor's Save face holds what the page shows: a track's frame (its activations
     and head rotation to float32's precision) with a dial moved, and a model's sliders; the

@@ -13,6 +13,10 @@ as a small JSON file (:data:`FORMAT`)::
                                              # named MODE:LABEL, e.g. "viseme:eel")
      "head": {"yaw": 20.0, "pitch": -5.0, "roll": 0.0}}   # degrees
 
+``frame`` is the shown frame's number (a plate's as its files, ``1004`` of a plate numbered
+from 1001; a video's or a take's row from 0; :mod:`facetransfer.io.frame_numbers`), None on a
+model's page.
+
 ``render --face`` and ``model synth --face`` make that face with the model itself: the identity
 moved by the dials on the whole face (the page shows their offsets of the neutral only, without
 the model's identity-expression cross term), the expression from the ARKit activations

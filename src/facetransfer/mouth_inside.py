@@ -31,7 +31,9 @@ Here, decided by measurement:
    lip in the lips' colour darkened (:data:`TONGUE_SHARE`, :data:`TONGUE_LEVEL`); the lower
    teeth over it (:data:`LOWER_SHOW`, :data:`LOWER_SHARE`) and the upper teeth under the upper
    lip (:data:`facetransfer.palette.TEETH_SHOW` eye widths, at most :data:`UPPER_SHARE` of the
-   opening), over the middle of the mouth's width, in the palette's teeth colour at
+   opening), over the middle of the mouth's width, drawn on the dental arch behind the lips
+   seen along the camera's view in the head's frame (:data:`ARCH_CURVE`: a turned head's far
+   teeth foreshortened, hidden past the far lip's corner), in the palette's teeth colour at
    :data:`TEETH_LEVEL` of the target's skin (one gain: lit like the target's face), darker
    toward the mouth's corners, in the upper lip's shadow and on the lower teeth, parted at the
    incisors; the lips' inner edge blended over :data:`EDGE_FEATHER` of the mouth's width. The
@@ -86,16 +88,24 @@ UPPER_SHARE = 0.45
 LOWER_SHARE = 0.25
 #: How far the lower teeth show over the lower lip, in eye widths (about 2.7 mm).
 LOWER_SHOW = 0.1
-#: The teeth's luminance over the target's skin's (the median around its mouth): the palette's
-#: teeth over its skin (1.21), a little more. At the palette's ratio times the skin's lit side
-#: (0.8 of its 75th percentile) the teeth of ``driving_d9``'s closed stretch were a dull grey,
-#: 115 beside a skin of 119, which its orange light showed as blue.
-TEETH_LEVEL = 1.25
+#: The teeth's luminance over the target's skin's (the median around its mouth), measured
+#: where real teeth show: the brightest twentieth of the opening (MediaPipe's inner lips in
+#: the clips' frames opened over a quarter of their width, where that twentieth is over 1.6
+#: times the opening's median; the human points' in the photo) over the median of the skin
+#: about the mouth: ``takeo.ppm`` 1.55 (and 1.56 darkened to 0.35), ``WDA_KatieHill_000``
+#: 1.48, ``driving_d6`` 1.35, ``face_2`` 0.85 (a darkly lit face), ``driving_d9`` 0.67 (lower
+#: teeth in the lip's shadow): their median. Over the eye whites' (their brightest tenth)
+#: the clips' ratios are no steadier (1.46, 0.93, 1.22, 0.70): the teeth follow the light
+#: the skin shows. (mouth54's 1.25, the palette's teeth over its skin, 1.21, a little more,
+#: drew them under every source whose upper teeth show lit.)
+TEETH_LEVEL = 1.35
 #: The lower teeth, in the lower lip's shadow, at this fraction of the upper teeth's light.
 LOWER_SHADE = 0.7
-#: Where the teeth part, eye widths from the middle: the central incisors (8.5 mm) and the
-#: lateral ones (6.5 mm); the line's half-width (eye widths) and how much it darkens.
-TEETH_PARTS = (0.0, 0.32, 0.56)
+#: Where the teeth part, eye widths from the middle: the central incisors (8.5 mm), the
+#: lateral ones (6.5 mm), the canines (7.5 mm) and the first premolars (7 mm), these two seen on
+#: a turned head's near side (:func:`_seen_as`); the line's half-width (eye widths) and how
+#: much it darkens.
+TEETH_PARTS = (0.0, 0.32, 0.56, 0.84, 1.1)
 PART_WIDTH = 0.012
 PART_SHADE = 0.15
 #: The tongue: a dome over the lower lip rising to this share of the opening's height in the
@@ -104,6 +114,15 @@ PART_SHADE = 0.15
 TONGUE_SHARE = 0.35
 TONGUE_SPAN = 0.75
 TONGUE_LEVEL = 0.6
+#: The dental arch the teeth are drawn on, seen through the opening along the camera's view in
+#: the head's frame: a parabola ``z = front - ARCH_CURVE x²`` (eye widths) about the mouth's
+#: middle, its front :data:`ARCH_BEHIND` eye widths behind the upper (the lower) lip's inner
+#: edge at the middle. The canines, 17 mm from the middle, lie 9 mm behind the incisors (an
+#: adult's upper arch; an eye width 26.9 mm): 0.33 / 0.64² = 0.81. A head turned away shows
+#: the near side's teeth and hides the far side's behind the far lip's corner; a frontal head
+#: sees each point of the arch straight behind the opening's point, as the flat band did.
+ARCH_CURVE = 0.81
+ARCH_BEHIND = 0.05
 #: The lips' inner edge: the drawn inside fades in over this fraction of the mouth's width
 #: (in pixels, at least one).
 EDGE_FEATHER = 0.06
@@ -351,7 +370,8 @@ def paint_inside(mouth_img: np.ndarray, raster, V: np.ndarray, camera, topo: Mes
     bary = raster.bary[ys, xs].astype(np.float64)
     X = np.einsum("nk,nkd->nd", bary, V[topo.faces[tid]])        # the head's frame
     px = 1.0 / max(float(getattr(camera, "scale", 1.0)), 1e-9)   # model units a pixel
-    colour = _inside_colours(X, bary[:, 2], V, topo, inside, px)
+    view = np.asarray(getattr(camera, "rotation", np.eye(3)), np.float64)[2]
+    colour = _inside_colours(X, bary[:, 2], V, topo, inside, px, -view)
     a = s * _edge_alpha(fan, ys, xs, max(1.0, EDGE_FEATHER * width))
     old = mouth_img[ys, xs].astype(np.float64)
     mouth_img[ys, xs] = np.clip(old + a[:, None] * (colour - old) + 0.5, 0, 255).astype(np.uint8)
@@ -370,12 +390,13 @@ def _edge_alpha(fan: np.ndarray, ys: np.ndarray, xs: np.ndarray, feather: float)
     return np.clip(d[ys - y0, xs - x0] / feather, 0.0, 1.0)
 
 
-def _visible_edges(X: np.ndarray, px: float) -> tuple[np.ndarray, np.ndarray]:
-    """``(up, low)`` (n,): the opening's visible upper and lower edges over each of the fan's
-    points ``X`` (n, 3) (the head's frame): the highest and the lowest point seen in its
-    column (x in bins of 1.5 pixels, ``px`` model units a pixel), interpolated between
-    columns. The lips occlude the fan's rim (the inner-lip loop lies behind their edge), so
-    the teeth hang from where the lips are seen to end."""
+def _visible_edges(X: np.ndarray, px: float):
+    """The opening's visible upper and lower edges over the points ``X`` (n, >= 2) it shows
+    (the fan's, or the dental arch's: x and y in the head's frame): a function of x (m,)
+    giving ``(up, low)`` (m,) there, the highest and the lowest point seen in its column (x in
+    bins of 1.5 pixels, ``px`` model units a pixel), interpolated between columns. The lips
+    occlude the fan's rim (the inner-lip loop lies behind their edge), so the teeth hang from
+    where the lips are seen to end."""
     x, y = X[:, 0], X[:, 1]
     lo, hi = float(x.min()), float(x.max())
     nb = max(int((hi - lo) / (1.5 * px)), 1)
@@ -384,44 +405,120 @@ def _visible_edges(X: np.ndarray, px: float) -> tuple[np.ndarray, np.ndarray]:
     np.maximum.at(top, b, y)
     np.minimum.at(bottom, b, y)
     seen = np.isfinite(top)
-    centres = lo + (np.arange(nb) + 0.5) * ((hi - lo) / nb)
-    return (np.interp(x, centres[seen], top[seen]), np.interp(x, centres[seen], bottom[seen]))
+    centres = (lo + (np.arange(nb) + 0.5) * ((hi - lo) / nb))[seen]
+    return lambda at: (np.interp(at, centres, top[seen]), np.interp(at, centres, bottom[seen]))
+
+
+def _arch_hits(X: np.ndarray, ray: np.ndarray, middle: float, front: float, eye: float
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(x, y, seen)`` (n,): where the view rays through the fan's points ``X`` (n, 3) (the
+    head's frame; ``ray`` (3,) the camera's view into the head there) first meet the dental
+    arch ``z = front - ARCH_CURVE x'²`` (x' = (x - ``middle``) / ``eye``, z in eye widths as
+    well): the arch point's x less ``middle`` and its y, and whether the ray meets the arch at
+    all (a ray passing beside its far side sees the cheek's dark inside). A frontal ray
+    (``ray`` along -z) meets it straight behind its point: ``x`` is the point's."""
+    P = np.column_stack([X[:, 0] - middle, X[:, 1], X[:, 2]]) / eye
+    d = ray / max(float(np.linalg.norm(ray)), 1e-12)
+    # X + t d on the arch: a t² + b t + c = 0
+    a = ARCH_CURVE * d[0] ** 2
+    b = d[2] + 2.0 * ARCH_CURVE * P[:, 0] * d[0]
+    c = P[:, 2] - front / eye + ARCH_CURVE * P[:, 0] ** 2
+    disc = b * b - 4.0 * a * c
+    seen = disc >= 0.0
+    root = np.sqrt(np.maximum(disc, 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):       # the nearer root, stably
+        t = np.where(b < 0.0, 2.0 * c / (root - b), (-b - root) / (2.0 * a))
+    t = np.where(seen & np.isfinite(t), t, 0.0)
+    return eye * (P[:, 0] + t * d[0]), eye * (P[:, 1] + t * d[1]), seen
+
+
+def _arch_fronts(V: np.ndarray, topo: MeshTopology, middle: float, half: float
+                 ) -> tuple[float, float]:
+    """``(upper, lower)``: the z of the upper and the lower lips' inner edges (the closed mesh
+    ``V``'s inner-lip loop above and below its mean height) at their foremost over the middle
+    third of the mouth (``middle`` its x, ``half`` its half-width): the dental arches' fronts
+    lie :data:`ARCH_BEHIND` eye widths behind them. Either is the loop's foremost point where
+    the middle holds none of its points."""
+    loop = V[topo.mouth_loop]
+    mid = np.abs(loop[:, 0] - middle) < max(half / 3.0, 1e-12)
+    centre = float(loop[:, 1].mean())
+    upper, lower = loop[mid & (loop[:, 1] >= centre), 2], loop[mid & (loop[:, 1] < centre), 2]
+    z = float(loop[:, 2].max())
+    return (float(upper.max()) if upper.size else z), (float(lower.max()) if lower.size else z)
 
 
 def _inside_colours(X: np.ndarray, back: np.ndarray, V: np.ndarray, topo: MeshTopology,
-                    inside: DrawnInside, px: float) -> np.ndarray:
+                    inside: DrawnInside, px: float, ray: np.ndarray) -> np.ndarray:
     """``(n, 3)`` float64: the colour of the inside at the fan's points ``X`` (n, 3) (the head's
     frame; ``back`` (n,) the fan centre's barycentric): the cavity darker toward the back, the
-    tongue, the lower and the upper teeth over it (module docstring); ``px`` model units a
-    pixel (the parts' edges are soft over one)."""
+    tongue, the lower and the upper teeth over it (module docstring), the teeth on the dental
+    arch seen along ``ray`` (3,), the camera's view into the head (:func:`_arch_hits`); ``px``
+    model units a pixel (the parts' edges are soft over one)."""
     colour = inside.cavity[None, :] * (1.0 - (1.0 - CAVITY_BACK) * back)[:, None]
     loop = V[topo.mouth_loop, 0]
     E = V[inside.eyes]
     eye = 0.5 * (np.linalg.norm(E[0] - E[1]) + np.linalg.norm(E[2] - E[3]))
     half = 0.5 * (loop.max() - loop.min())
-    x = X[:, 0] - 0.5 * (loop.min() + loop.max())
-    up, low = _visible_edges(X, px)
-    gap = np.maximum(up - low, 0.0)
-    y = X[:, 1]
+    middle = 0.5 * (loop.min() + loop.max())
+    x, y = X[:, 0] - middle, X[:, 1]
+    edges = _visible_edges(X, px)
+    up, low = edges(X[:, 0])
 
     def over(part, a):                                   # ``part`` (n, 3) where ``a`` (n,)
         colour[:] += a[:, None] * (part - colour)
 
     u = np.clip(np.abs(x) / (TONGUE_SPAN * half), 0.0, 1.0)
-    top = low + TONGUE_SHARE * gap * np.sqrt(1.0 - u * u)                 # a dome
+    top = low + TONGUE_SHARE * np.maximum(up - low, 0.0) * np.sqrt(1.0 - u * u)     # a dome
     over(inside.tongue[None, :] * (1.0 - 0.4 * u)[:, None],
          np.clip((top - y) / px + 0.5, 0.0, 1.0) * (u < 1.0))
     span = TEETH_SPAN * half
+    fronts = _arch_fronts(V, topo, middle, half)
+    for lower, front in ((True, fronts[1]), (False, fronts[0])):
+        xa, ya, seen = _arch_hits(X, ray, middle, front - ARCH_BEHIND * eye, eye)
+        if not seen.any():
+            continue
+        # the lips' edges where they cover the arch (a nod moves them over it, not the teeth)
+        at_up, at_low = _visible_edges(np.column_stack([xa, ya])[seen], px)(xa)
+        gap = np.maximum(at_up - at_low, 0.0)
+        reach = _seen_as(xa, ray, eye)
+        teeth = _teeth(inside.teeth, xa, span, eye)
+        if lower:
+            edge = at_low + np.minimum(LOWER_SHOW * eye, LOWER_SHARE * gap)
+            a = np.clip((edge - ya) / px + 0.5, 0.0, 1.0)
+            over(teeth * LOWER_SHADE, a * np.clip((0.8 * span - reach) / px + 0.5, 0, 1)
+                 * seen)
+        else:
+            edge = at_up - np.minimum(TEETH_SHOW * eye, UPPER_SHARE * gap)
+            under = 0.6 + 0.4 * np.clip((up - y) / (0.1 * eye), 0.0, 1.0)  # the lip's shadow
+            a = np.clip((ya - edge) / px + 0.5, 0.0, 1.0)
+            over(teeth * under[:, None], a * np.clip((span - reach) / px + 0.5, 0, 1)
+                 * seen)
+    return colour
+
+
+def _seen_as(x: np.ndarray, ray: np.ndarray, eye: float) -> np.ndarray:
+    """``(n,)`` >= 0: how far from the middle the teeth at the dental arch's points ``x`` (n,)
+    from the middle (model units; ``eye`` the eye width) reach as a frontal view's do: ``|x|``,
+    or nearer the middle where ``ray`` (3,) sees the arch more squarely than a frontal view
+    sees it there (the arch's normal against the view, both across the head: a nod does not
+    turn the teeth). A turned head's near side, its canine seen squarely, shows teeth past the
+    frontal span; the far side is foreshortened and hidden by the arch's own geometry
+    (:func:`_arch_hits`). Frontal: ``|x|``."""
+    u = x / eye
+    v = np.array([-ray[0], -ray[2]]) / max(float(np.hypot(ray[0], ray[2])), 1e-12)
+    facing = (2.0 * ARCH_CURVE * u * v[0] + v[1]) / np.sqrt(1.0 + (2.0 * ARCH_CURVE * u) ** 2)
+    with np.errstate(divide="ignore"):
+        slope = np.sqrt(np.maximum(1.0 / np.maximum(facing, 0.0) ** 2 - 1.0, 0.0))
+    return np.minimum(np.abs(x), eye * slope / (2.0 * ARCH_CURVE))
+
+
+def _teeth(colour: np.ndarray, x: np.ndarray, span: float, eye: float) -> np.ndarray:
+    """``(n, 3)``: the teeth's ``colour`` (3,) at the arch's points ``x`` (n,) from the mouth's
+    middle: darker toward the mouth's corners (``span`` the teeth's half-width), parted at
+    the incisors (:data:`TEETH_PARTS`, eye widths ``eye``)."""
     side = np.clip(1.0 - np.abs(x) / span, 0.0, 1.0)
     light = 0.45 + 0.55 * (1.0 - (1.0 - side) ** 2)                      # the corners' dark
-    parted = 1.0 - PART_SHADE * np.exp(-((np.abs(x)[:, None] - np.asarray(TEETH_PARTS)) ** 2)
-                                       .min(axis=1) / (PART_WIDTH * eye) ** 2)
-    teeth = inside.teeth[None, :] * (light * parted)[:, None]
-    edge_low = low + np.minimum(LOWER_SHOW * eye, LOWER_SHARE * gap)
-    reach = np.clip((0.8 * span - np.abs(x)) / px + 0.5, 0.0, 1.0)
-    over(teeth * LOWER_SHADE, np.clip((edge_low - y) / px + 0.5, 0.0, 1.0) * reach)
-    edge_up = up - np.minimum(TEETH_SHOW * eye, UPPER_SHARE * gap)
-    under = 0.6 + 0.4 * np.clip((up - y) / (0.1 * eye), 0.0, 1.0)         # the lip's shadow
-    reach = np.clip((span - np.abs(x)) / px + 0.5, 0.0, 1.0)
-    over(teeth * under[:, None], np.clip((y - edge_up) / px + 0.5, 0.0, 1.0) * reach)
-    return colour
+    parts = eye * np.asarray(TEETH_PARTS)       # eye widths (before: taken as model units)
+    parted = 1.0 - PART_SHADE * np.exp(-((np.abs(x)[:, None] - parts) ** 2).min(axis=1)
+                                       / (PART_WIDTH * eye) ** 2)
+    return colour[None, :] * (light * parted)[:, None]

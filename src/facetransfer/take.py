@@ -251,7 +251,8 @@ def take_performance(path, target_track, model, *, align: str | None = None,
     a = take_on_timeline(t, take.activations, target_track.n_frames, target_track.fps,
                          align=align, start=start)
     _say_held(path, float(t[-1]) - start + _row_step(t, target_track.fps), len(a),
-              target_track.fps, align, track_first_number(target_track))
+              target_track.fps, align, track_first_number(target_track),
+              _rows_rate(t, _timecode_fields(take.timecodes)) if len(t) > 1 else None)
     new = take_frames(target_track, np.arange(len(a)))
     weights = dict(new.weights)
     weights["expression"] = activations_to_weights(model, np.clip(a, 0.0, 1.0))
@@ -273,18 +274,23 @@ def _row_step(t: np.ndarray, fps: float) -> float:
 
 
 def _say_held(path, left: float, n: int, fps: float, align: str | None,
-              first: int = 0) -> None:
+              first: int = 0, rows: float | None = None) -> None:
     """Warn where a take that ends ``left`` seconds after the target's first frame (its last
     row's span included) leaves the last of its ``n`` frames (at ``fps``) holding its last
     row (``align`` None or "hold"): the performance stands still there, which the user would
-    not see coming. The target's frames numbered from ``first`` (a plate's first number)."""
+    not see coming. The target's frames numbered from ``first`` (a plate's first number); the
+    take's ``rows`` a second said where they are not the target's frames a second (a plate
+    that stores no rate, read at 24 fps, under a take of 30: it ends a fifth early)."""
     if align not in (None, "hold") or n < 1:
         return
     k = max(int(np.ceil(left * fps - _SLACK)), 1)     # the frames the take's rows reach
     if k < n:
-        log.warning("the take %s ends at the target's frame %d: its last row is held on "
+        rates = "" if rows is None or abs(rows - fps) <= 1e-3 * fps else \
+            f" (its rows {rows:g} a second, the target's frames {fps:g})"
+        log.warning("the take %s ends at the target's frame %d%s: its last row is held on "
                     "frames %d-%d (--align trim stops the result there, loop repeats the "
-                    "take)", path, first + max(k - 1, 0), first + max(k, 0), first + n - 1)
+                    "take)", path, first + max(k - 1, 0), rates, first + max(k, 0),
+                    first + n - 1)
 
 
 def _take_clock(timecodes, fps: float, start_timecode: str | None, name: str

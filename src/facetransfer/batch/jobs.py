@@ -281,16 +281,16 @@ def _chunk_capture(frames, model, options, job, chunk, identity):
     source = str(job.video)
     det, fps, size, src = detect_video(frames, source=source, view=View.of(job.video),
                                        subject=_subject(job.face, frames, source))
-    held = held_identity(det, model, options.capture, identity)
-    if held is None and det.found.any():
-        from ..io.frame_numbers import first_number
+    from ..io.frame_numbers import first_number
 
-        first = first_number(source)          # a plate's frames by their numbers
+    held = held_identity(det, model, options.capture, identity)
+    first = first_number(source) + chunk.start   # the chunk's first frame by the clip's numbers
+    if held is None and det.found.any():
         log.warning("%s: frames %d-%d begin on another face than the clip's first (a cut "
                     "before them): captured with their own identity", source,
-                    first + chunk.start, first + chunk.stop - 1)
+                    first, first + chunk.stop - chunk.start - 1)
     return capture_detections(det, model, options=options.capture, fps=fps, frame_size=size,
-                              source=src, fixed=held)
+                              source=src, fixed=held, first_frame=first)
 
 
 def join_clip(job, out: str, model, chunks, results, overwrite: bool = False,

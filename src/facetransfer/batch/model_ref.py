@@ -12,8 +12,8 @@ model from the file as the others did. A model file is mapped, not read (its cor
 MB, :func:`facetransfer.model.load_model`): the workers of one machine share its pages, where
 each held a copy of its own of the scattered model.
 
-A model without a file that is still as it was loaded or saved (built in memory by a library
-caller), or whose file some of the workers do not see (:func:`hosts_without`: machines without
+A model without a file that still holds it (built in memory by a library caller; a file
+touched since, its content the same, still holds it), or whose file some of the workers do not see (:func:`hosts_without`: machines without
 the shared file system, nor the default model in their own cache), is scattered as before
 (:func:`facetransfer.batch.cluster.scatter_model`).
 """
@@ -54,11 +54,17 @@ class ModelRef:
 
 
 def model_ref(model) -> ModelRef | None:
-    """The :class:`ModelRef` of ``model``, None where it has no file still as it was loaded
-    or saved (:func:`facetransfer.model.model_file`)."""
+    """The :class:`ModelRef` of ``model``, None where it has no file that still holds it
+    (:func:`facetransfer.model.model_file`; a file touched since it was loaded, its content
+    the same, still holds it: :func:`facetransfer.model.file_written_over` judges it by its
+    content)."""
     from ..default_model import default_model_path
-    from ..model import model_file
+    from ..model import file_written_over, model_file
 
+    # a file only touched since (another modification time, the same content) is confirmed
+    # by its content and taken as it is now: before, it was taken for another file and the
+    # whole model was sent to every worker instead of its path (batch55)
+    file_written_over(model)
     path = model_file(model)
     if path is None:
         return None

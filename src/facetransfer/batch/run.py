@@ -484,6 +484,7 @@ def _kept(jobs, outs: dict, out_dir: Path, keys: dict, found,
     with the options as a version before wrote them (:func:`.digest.same_job`: a summary an
     older version wrote still keeps what it finished; the row then gets the new digest)."""
     earlier, done = _earlier(out_dir), {}
+    said = {r.clip: r for r in _earlier_rows(out_dir) if r.ok}
     for j in jobs:
         r = found(outs[j.name], j.name)
         if r is None:
@@ -493,10 +494,25 @@ def _kept(jobs, outs: dict, out_dir: Path, keys: dict, found,
         worded = None if before is None else (lambda job=j: before(job))
         if r.ok and not same_job(made, keys[j.name], old, worded):  # (a failed row: its why)
             r = _refused(j.name, outs[j.name], made)
+        elif r.ok:
+            r = _figures_said(r, said.get(j.name), outs[j.name])
         # a refused output keeps its maker's digest: a later run still knows it
         done[j.name] = dataclasses.replace(r, job=keys[j.name] if r.ok
                                            else earlier.get(j.name, ""))
     return done
+
+
+def _figures_said(row: Row, earlier: Row | None, out: Path) -> Row:
+    """``row`` (of an output kept, made by this job) with the frames, rate and mean confidence
+    it does not know taken from ``earlier``, the earlier summary's done or skipped row of that
+    output. A result video does not hold its target's confidence, a Live Link Face take or a
+    glb its frames, rate or confidence: before, a rerun's summary (a run resumed after a
+    Ctrl-C) left those cells empty for every output it kept (batch55)."""
+    if earlier is None or Path(earlier.output).name != out.name:
+        return row
+    return dataclasses.replace(row, **{
+        f: getattr(earlier, f) for f in ("frames", "fps", "mean_confidence")
+        if getattr(row, f) is None})
 
 
 def _refused(name: str, out: Path, made: str) -> Row:

@@ -85,10 +85,11 @@ def _blend_shapes(stage, mesh, rig, pxr):
 def source_first_frame(track) -> int:
     """The first frame number of the image sequence a track was made from (1001 for a plate
     numbered from 1001), as the track records it, else (an older track) read from its
-    ``source`` (:func:`facetransfer.export.common.clip_facts`); 0 for a video."""
-    from .common import clip_facts
+    ``source`` where that is still its clip; 0 for a video: the number every message names
+    the track's first frame by (:func:`facetransfer.io.frame_numbers.track_first_number`)."""
+    from ..io.frame_numbers import track_first_number
 
-    return clip_facts(track)[0].first_frame
+    return track_first_number(track)
 
 
 def posed_extents(rig, activations, rotation, translation, *, chunk: int = 64) -> np.ndarray:

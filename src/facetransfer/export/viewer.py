@@ -20,7 +20,12 @@ Identity dials act on the neutral face (their offsets are exact there); the expr
 stay those of the shown identity (the bilinear cross term is left out in the page).
 
 The page reads ``#name=value&...`` from its URL (slider ids, ``frame=K``, ``play``) so that a
-view can be linked, and so the tests can drive it from headless Chromium.
+view can be linked, and so the tests can drive it from headless Chromium. ``K`` is the frame's
+number (:mod:`facetransfer.io.frame_numbers`: a plate's as its files, ``frame=1004`` of a
+plate from 1001; a video's row from 0), as the page's counter, its own address and its saved
+face's ``frame`` name it; an older page's address kept the row, which is read as such where
+it is none of the plate's numbers and the plate's start past its rows (``frame=3`` of a plate
+of 20 frames from 1001).
 """
 
 from __future__ import annotations

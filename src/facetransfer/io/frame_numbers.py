@@ -38,13 +38,21 @@ def first_number(clip: str | os.PathLike | None) -> int:
 
 def track_first_number(track) -> int:
     """The number of the first frame of the clip ``track`` was made from, as the track records
-    it (its ``source_facts``: a plate's 1001 after the plate moved), else its ``source``'s
-    (:func:`first_number`; 0 for a track of a video, a take's or a synthetic one)."""
+    it (its ``source_facts``: a plate's 1001 after the plate moved), else (a track made before
+    tracks recorded it) its ``source``'s where that is still its clip, of the track's frame
+    size (:func:`facetransfer.io.source_facts.track_source_facts`, the rule the exports number
+    frames by: another plate now at the path, or none, numbers from 0); 0 for a track of a
+    video, a take's or a synthetic one."""
+    from .source_facts import track_source_facts
+    from .video_sequence import is_sequence
+
     facts = getattr(track, "source_facts", None)
     if facts is not None:
         return int(facts.first_frame)
     source = getattr(track, "source", None)
-    return first_number(source or None)
+    if not source or not is_sequence(source):     # a video's, a take's: 0, nothing to read
+        return 0
+    return int(track_source_facts(track)[0].first_frame)
 
 
 def frame_runs(mask, first: int = 0, limit: int = 4) -> str:

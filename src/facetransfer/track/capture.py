@@ -388,7 +388,8 @@ def _track_run(shape: Shape, det: ClipDetections, order: list, seed: FrameState 
 def capture_detections(det: ClipDetections, model, *, options: CaptureOptions | None = None,
                        fps: float = 30.0, frame_size: tuple[int, int] = (0, 0),
                        fixed: dict | None = None, progress: Progress | None = None,
-                       source: str = "", checkpoint=None) -> Track:
+                       source: str = "", checkpoint=None, first_frame: int | None = None
+                       ) -> Track:
     """Fit the model to a clip's detections and flow (steps 2-5 of the module notes).
 
     Parameters
@@ -408,6 +409,11 @@ def capture_detections(det: ClipDetections, model, *, options: CaptureOptions | 
         holds for this model and these options is continued; the progress is saved when
         ``checkpoint.due()`` and when the run is interrupted (``KeyboardInterrupt``). Any
         object with ``due()``, ``saved_fit(key)`` and ``save_fit(det, key, fit)`` will do.
+    first_frame : int, optional
+        The number a user knows the first of ``det``'s frames by, in what is said of a cut or of
+        no face found (:mod:`facetransfer.io.frame_numbers`): a ``batch track --chunk`` chunk's
+        is its clip's first number plus the chunk's start. Default: ``source``'s first number
+        (a plate's, 1001 on; 0 for a video).
 
     Returns
     -------
@@ -416,32 +422,33 @@ def capture_detections(det: ClipDetections, model, *, options: CaptureOptions | 
     """
     from threadpoolctl import threadpool_limits
 
+    n0 = first_number(source) if first_frame is None else int(first_frame)
+
     # small products: threads only cost; an interrupt in a compiled kernel as an interrupt
     with threadpool_limits(limits=1, user_api="blas"), plain_interrupts():
         spans = shot_spans(shot_starts(det), det.n_frames)
         if len(spans) == 1:
             return _capture_detections(det, model, options, fps, frame_size, fixed, progress,
-                                       source, checkpoint)
+                                       source, checkpoint, first=n0)
         return _capture_shots(det, spans, model, options, fps, frame_size, fixed, progress,
-                              source)
+                              source, n0)
 
 
 def _capture_shots(det, spans, model, options, fps, frame_size, fixed, progress,
-                   source) -> Track:
+                   source, n0: int = 0) -> Track:
     """A clip edited from several shots (:mod:`facetransfer.track.shots`), each captured on its
     own (its own identity, save the first one's person's later shots: :func:`held_identity`;
     no flow or smoothing across a cut), joined; a ``fixed`` identity is the first shot's with a
     face (the face the clip starts with, after any black opening); the fit's progress is not
-    kept for such a clip."""
+    kept for such a clip. ``n0``: the number of ``det``'s first frame, as cuts are named."""
     subs = [shot_detections(det, a, b) for a, b in spans]
     faced = [a for (a, _), sub in zip(spans, subs) if sub.found.any()]
     if len(faced) > 1:  # a shot without a face (a clip that opens on black) is only lost
-        n0 = first_number(source)             # a plate's frames by their numbers
         log.warning("%s cuts to another shot at frame%s %s: each shot is captured on its own "
                     "(the first one's person's shots with its identity)", source or "the video",
                     "s" if len(faced) > 2 else "", ", ".join(str(n0 + a) for a in faced[1:]))
     if not faced:
-        raise _no_face(source, det.n_frames)
+        raise _no_face(source, det.n_frames, n0)
     tracks, first = [], None     # first: the identity of the first shot with a face
     for sub in subs:
         if not sub.found.any():
@@ -478,13 +485,15 @@ def held_identity(det, model, options, first: np.ndarray | None) -> dict | None:
     return {"identity": first} if same_face(model, shape.identity, first) else None
 
 
-def _no_face(source, n_frames: int) -> VideoError:
+def _no_face(source, n_frames: int, first: int | None = None) -> VideoError:
+    """``n_frames`` searched from the frame numbered ``first`` (default: ``source``'s first)."""
+    n0 = first_number(source) if first is None else first
     return VideoError(f"no face found in {source or 'the video'} (searched frames "
-                      f"{frame_span(first_number(source), n_frames)})")
+                      f"{frame_span(n0, n_frames)})")
 
 
 def _capture_detections(det, model, options, fps, frame_size, fixed, progress, source,
-                        checkpoint=None) -> Track:
+                        checkpoint=None, first: int | None = None) -> Track:
     opt = options or CaptureOptions()
     require_landmarks(model)
     fixed = dict(fixed or {})
@@ -493,7 +502,7 @@ def _capture_detections(det, model, options, fps, frame_size, fixed, progress, s
         raise TrackError(f"capture can keep only the identity fixed, got {sorted(unknown)}")
     found = det.found
     if not found.any():
-        raise _no_face(source, det.n_frames)
+        raise _no_face(source, det.n_frames, first)
     prog = progress or (lambda stage, done, total: None)
     weights, sampler = _point_weights(det, model, opt)
     t0 = time.perf_counter()
