@@ -157,6 +157,49 @@ def _read_accessor(g, i: int) -> np.ndarray:
     return out
 
 
+def test_glb_eyeballs_sit_behind_the_eye_holes_and_turn_with_the_gaze(case, tmp_path):
+    """The glb's face has holes where the eyes are, and nothing behind them: Blender, Unreal or
+    three.js showed the head's inside through them (the `view` page and the puppet draw an
+    eyeball there). Now two eyeball nodes, children of the face, sit where the gaze model puts
+    them on the file's own neutral face, and the animation turns each so that its pupil (+z)
+    looks where the eyeLook* curves say (35 degrees a unit of In/Out, 28 of Up/Down)."""
+    from pygltflib import GLTF2
+    from scipy.spatial.transform import Rotation
+
+    from facetransfer.track.gaze import eye_model
+
+    model, track, a, _ = case
+    out = export_track(track, "glb", tmp_path / "face.glb", model=model)
+    g = GLTF2().load(str(out))
+    assert [n.name for n in g.nodes] == ["face", "eyeRight", "eyeLeft"]
+    assert g.nodes[0].children == [1, 2] and g.scenes[0].nodes == [0]
+    rest = _read_accessor(g, g.meshes[0].primitives[0].attributes.POSITION).astype(np.float64)
+    eyes = eye_model(rest[np.asarray(model.landmarks)] / 0.01)   # the file's face, in cm
+    col = {n: a[:, ARKIT_NAMES.index(n)].astype(np.float64) for n in ARKIT_NAMES}
+    h, v = np.deg2rad(35.0), np.deg2rad(28.0)
+    chans = {c.target.node: c.sampler for c in g.animations[0].channels
+             if c.target.path == "rotation"}
+    for k, side in enumerate(("Right", "Left")):
+        node = g.nodes[1 + k]
+        np.testing.assert_allclose(node.translation, eyes.centre[k] * 0.01, atol=1e-6)
+        np.testing.assert_allclose(node.scale, [eyes.radius[k] * 0.01] * 3, rtol=1e-6)
+        inward = col[f"eyeLookIn{side}"] - col[f"eyeLookOut{side}"]
+        yaw = inward * h * (1.0 if side == "Right" else -1.0)   # + toward the subject's left
+        pitch = (col[f"eyeLookUp{side}"] - col[f"eyeLookDown{side}"]) * v
+        want = np.stack([np.sin(yaw) * np.cos(pitch), np.sin(pitch),
+                         np.cos(yaw) * np.cos(pitch)], -1)
+        q = _read_accessor(g, g.animations[0].samplers[chans[1 + k]].output).astype(np.float64)
+        np.testing.assert_allclose(Rotation.from_quat(q).apply([0.0, 0.0, 1.0]), want, atol=1e-6)
+    prim = g.meshes[g.nodes[1].mesh].primitives[0]
+    P = _read_accessor(g, prim.attributes.POSITION)
+    C = _read_accessor(g, prim.attributes.COLOR_0)
+    np.testing.assert_allclose(np.linalg.norm(P, axis=1), 1.0, atol=1e-6)
+    dark = C.sum(axis=1) < 0.05                     # the pupil, at the sphere's front (+z)
+    assert dark.any() and P[dark, 2].min() > 0.9 and (P[:, 2] < -0.9).any()
+    issues = _validate(out)  # last: skips when node or the validator is absent
+    assert issues["numErrors"] == 0 and issues["numWarnings"] == 0, issues["messages"]
+
+
 def test_glb_morph_targets_and_animation(case, tmp_path):
     import pygltflib
     import trimesh
@@ -174,7 +217,7 @@ def test_glb_morph_targets_and_animation(case, tmp_path):
     assert len(prim.targets) == 52 and g.images and g.materials[0].pbrMetallicRoughness \
         .baseColorTexture.index == 0
     anim = g.animations[0]
-    paths = {c.target.path: c.sampler for c in anim.channels}
+    paths = {c.target.path: c.sampler for c in anim.channels if c.target.node == 0}  # the face's
     assert set(paths) == {"weights", "rotation", "translation"}
     times = _read_accessor(g, anim.samplers[paths["weights"]].input)[:, 0]
     np.testing.assert_allclose(times, np.arange(track.n_frames) / track.fps, atol=1e-6)
@@ -189,7 +232,7 @@ def test_glb_morph_targets_and_animation(case, tmp_path):
     want = model.synthesize(track.weights_at(k)) * 0.01  # metres
     np.testing.assert_allclose(V0 + np.tensordot(a[k].astype(np.float64), T, 1), want,
                                atol=2e-6)
-    tm = trimesh.load(out, force="mesh", process=False)
+    tm = trimesh.load(out, force="scene", process=False).geometry["face"]   # the eyes apart
     assert len(tm.vertices) == model.n_vertices and len(tm.faces) == len(model.faces)
     issues = _validate(out)  # last: skips when node or the validator is absent
     assert issues["numErrors"] == 0 and issues["numWarnings"] == 0, issues["messages"]

@@ -9,7 +9,10 @@ normals shades an open jaw as open) named in
 ``mesh.extras.targetNames`` in :data:`facetransfer.arkit.ARKIT_NAMES` order (the convention
 three.js, Blender and Babylon read). One animation ``performance`` has a ``weights`` channel with
 one key per frame (time ``k / fps``, LINEAR) whose values are the track's activations, and the
-head pose as the node's ``rotation`` and ``translation`` channels (same keys). Positions are in
+head pose as the node's ``rotation`` and ``translation`` channels (same keys). Behind the
+face's eye holes, two eyeball nodes (``eyeRight``, ``eyeLeft``: children of ``face``) turned by
+the gaze the eyeLook* curves say, a ``rotation`` channel each (:mod:`.gltf_eyes`; not for a
+model without landmarks). Positions are in
 metres (glTF's unit): model units times ``metres_per_unit`` (0.01 for the ICT-FaceKit's
 centimetres).
 
@@ -297,20 +300,55 @@ def _mesh(gltf, blob: _Blob, rig, model, unit: float, material: int) -> None:
                             extras={"targetNames": list(ARKIT_NAMES)}))
 
 
-def _animation(gltf, blob: _Blob, track, activations: np.ndarray, unit: float) -> None:
+def _eyes(gltf, blob: _Blob, model, rig, unit: float) -> list[int]:
+    """The eyeball nodes (:mod:`facetransfer.export.gltf_eyes`), children of node 0, and
+    their mesh and material; their indices, none for a model without landmarks."""
+    from pygltflib import Attributes, Material, Mesh, Node, PbrMetallicRoughness, Primitive
+
+    from .gltf_eyes import EYE_NODES, eye_placement, eyeball_mesh
+
+    placed = eye_placement(model, rig.neutral)
+    if placed is None:
+        return []
+    P, C, T = eyeball_mesh()
+    gltf.materials.append(Material(name="eye", pbrMetallicRoughness=PbrMetallicRoughness(
+        baseColorFactor=[1.0, 1.0, 1.0, 1.0], metallicFactor=0.0, roughnessFactor=0.3)))
+    prim = Primitive(attributes=Attributes(POSITION=blob.accessor(P, "VEC3", bounds=True),
+                                           NORMAL=blob.accessor(P, "VEC3"),
+                                           COLOR_0=blob.accessor(C, "VEC3")),
+                     indices=blob.accessor(T, "SCALAR", target=_ELEMENTS),
+                     material=len(gltf.materials) - 1)
+    gltf.meshes.append(Mesh(name="eyeball", primitives=[prim]))
+    nodes = []
+    for name, centre, radius in zip(EYE_NODES, *placed):
+        gltf.nodes.append(Node(name=name, mesh=len(gltf.meshes) - 1,
+                               translation=[float(x) for x in centre * unit],
+                               scale=[float(radius * unit)] * 3))
+        nodes.append(len(gltf.nodes) - 1)
+    return nodes
+
+
+def _animation(gltf, blob: _Blob, track, activations: np.ndarray, unit: float,
+               eyes: list[int]) -> None:
     from pygltflib import Animation, AnimationChannel, AnimationChannelTarget, AnimationSampler
+
+    from .gltf_eyes import eye_rotations
 
     t = (np.arange(track.n_frames) / track.fps).astype(np.float32).reshape(-1, 1)
     inp = blob.accessor(t, "SCALAR", target=None, bounds=True)
-    outs = {"weights": (activations.reshape(-1, 1).astype(np.float32), "SCALAR"),
-            "rotation": (head_quaternions(track.rotation).astype(np.float32), "VEC4"),
-            "translation": ((head_translation(track) * unit).astype(np.float32), "VEC3")}
+    outs = [(0, "weights", activations.reshape(-1, 1).astype(np.float32), "SCALAR"),
+            (0, "rotation", head_quaternions(track.rotation).astype(np.float32), "VEC4"),
+            (0, "translation", (head_translation(track) * unit).astype(np.float32), "VEC3")]
+    if eyes:
+        q = eye_rotations(activations).astype(np.float32)
+        outs += [(node, "rotation", np.ascontiguousarray(q[:, k]), "VEC4")
+                 for k, node in enumerate(eyes)]
     anim = Animation(name="performance")
-    for i, (path, (a, kind)) in enumerate(outs.items()):
+    for i, (node, path, a, kind) in enumerate(outs):
         anim.samplers.append(AnimationSampler(input=inp, output=blob.accessor(a, kind, target=None),
                                               interpolation="LINEAR"))
         anim.channels.append(AnimationChannel(sampler=i,
-                                              target=AnimationChannelTarget(node=0, path=path)))
+                                              target=AnimationChannelTarget(node=node, path=path)))
     gltf.animations.append(anim)
 
 
@@ -342,9 +380,11 @@ def write_glb(track, model, out: str | os.PathLike, *, overwrite: bool = False, 
     gltf.nodes.append(Node(name="face", mesh=0, rotation=[float(x) for x in q0],
                            translation=[float(x) for x in head_translation(track)[0]
                                         * metres_per_unit]))
+    eyes = _eyes(gltf, blob, model, rig, float(metres_per_unit))
+    gltf.nodes[0].children = eyes
     gltf.scenes.append(Scene(name="facetransfer", nodes=[0]))
     gltf.scene = 0
-    _animation(gltf, blob, track, a, float(metres_per_unit))
+    _animation(gltf, blob, track, a, float(metres_per_unit), eyes)
     pad = (-blob.buf.tell()) % 4
     blob.buf.write(b"\0" * pad)
     data = blob.buf.getvalue()
