@@ -200,6 +200,38 @@ def test_glb_eyeballs_sit_behind_the_eye_holes_and_turn_with_the_gaze(case, tmp_
     assert issues["numErrors"] == 0 and issues["numWarnings"] == 0, issues["messages"]
 
 
+def test_glb_mouth_opens_onto_its_inside_not_what_is_behind_the_head(case, tmp_path):
+    """The face's mouth is a hole in the mesh: an open jaw showed the background (or the head's
+    inside) through it in a player. Now the face mesh has a second primitive, a cone from the
+    inner lips' loop to a point behind it in the cavity's colour, whose morph targets move its
+    rim with the lips: at any weights its rim is the lips' own boundary."""
+    from pygltflib import GLTF2
+
+    model, track, a, _ = case
+    out = export_track(track, "glb", tmp_path / "face.glb", model=model)
+    g = GLTF2().load(str(out))
+    skin, inside = g.meshes[0].primitives            # the face mesh: skin, mouth's inside
+    F = _read_accessor(g, skin.indices).reshape(-1, 3)
+    fan = _read_accessor(g, inside.indices).reshape(-1, 3)
+    k = len(fan)
+    assert k > 8 and set(fan[:, 2]) == {k} and g.materials[inside.material].doubleSided
+    edges = {}
+    for tri in F:
+        for u, v in ((tri[0], tri[1]), (tri[1], tri[2]), (tri[2], tri[0])):
+            edges[frozenset((int(u), int(v)))] = edges.get(frozenset((int(u), int(v))), 0) + 1
+    for w in (np.zeros(52), a[3].astype(np.float64)):
+        face = _read_accessor(g, skin.attributes.POSITION).astype(np.float64) + np.tensordot(
+            w, np.stack([_read_accessor(g, t["POSITION"]) for t in skin.targets]), 1)
+        cone = _read_accessor(g, inside.attributes.POSITION).astype(np.float64) + np.tensordot(
+            w, np.stack([_read_accessor(g, t["POSITION"]) for t in inside.targets]), 1)
+        d = np.linalg.norm(face[None] - cone[:k, None], axis=2)
+        rim = d.argmin(axis=1)                        # the face's vertex under each rim vertex
+        assert d.min(axis=1).max() < 1e-6
+        assert all(edges.get(frozenset((int(rim[i]), int(rim[(i + 1) % k])))) == 1
+                   for i in range(k))                 # in order along the mesh's boundary
+        assert cone[k, 2] < cone[:k, 2].min()         # the point behind the lips
+
+
 def test_glb_morph_targets_and_animation(case, tmp_path):
     import pygltflib
     import trimesh

@@ -12,7 +12,9 @@ one key per frame (time ``k / fps``, LINEAR) whose values are the track's activa
 head pose as the node's ``rotation`` and ``translation`` channels (same keys). Behind the
 face's eye holes, two eyeball nodes (``eyeRight``, ``eyeLeft``: children of ``face``) turned by
 the gaze the eyeLook* curves say, a ``rotation`` channel each (:mod:`.gltf_eyes`; not for a
-model without landmarks). Positions are in
+model without landmarks), and the mouth's inside, a second primitive of the face mesh with its
+own morph targets (:func:`_mouth_inside`): the lips' gap no longer shows what is behind the
+head. Positions are in
 metres (glTF's unit): model units times ``metres_per_unit`` (0.01 for the ICT-FaceKit's
 centimetres).
 
@@ -296,8 +298,46 @@ def _mesh(gltf, blob: _Blob, rig, model, unit: float, material: int) -> None:
     idx = faces.astype(np.uint32).reshape(-1, 1)
     prim = Primitive(attributes=attrs, indices=blob.accessor(idx, "SCALAR", target=_ELEMENTS),
                      material=material, targets=targets)
-    gltf.meshes.append(Mesh(name="face", primitives=[prim], weights=[0.0] * len(rig.deltas),
+    prims = [prim] + _mouth_inside(gltf, blob, model, V, [(d * unit) for d in rig.deltas])
+    gltf.meshes.append(Mesh(name="face", primitives=prims, weights=[0.0] * len(rig.deltas),
                             extras={"targetNames": list(ARKIT_NAMES)}))
+
+
+def _mouth_inside(gltf, blob: _Blob, model, V: np.ndarray, deltas: list) -> list:
+    """The mouth's inside, a second primitive of the face mesh (none without a mouth gap): a
+    cone from the inner lips' loop (:func:`facetransfer.topology.mesh_topology`) to a point
+    behind its middle by :data:`facetransfer.export.viewer.CAVITY_DEPTH` of its width, as the
+    `view` page closes it, in the page's cavity colour, both sides shown. Its morph targets are
+    the loop's own deltas and their mean for the point, so an open jaw opens onto it (before,
+    a player showed what was behind the head there)."""
+    from pygltflib import Attributes, Material, PbrMetallicRoughness, Primitive
+
+    from ..palette import PALETTE
+    from ..topology import mesh_topology
+    from .viewer import CAVITY_DEPTH
+
+    loop = mesh_topology(model).mouth_loop
+    if loop.size == 0:
+        return []
+    rim = V[loop].astype(np.float64)
+    apex = rim.mean(axis=0) - [0.0, 0.0, CAVITY_DEPTH["mouth"] * np.ptp(rim[:, 0])]
+    P = np.concatenate([rim, apex[None]]).astype(np.float32)
+    k = len(loop)
+    fan = np.stack([np.roll(np.arange(k), -1), np.arange(k), np.full(k, k)], axis=1)
+    srgb = np.asarray(PALETTE["cavity"], np.float64) / 255.0
+    lin = np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
+    gltf.materials.append(Material(name="mouth", doubleSided=True,
+                                   pbrMetallicRoughness=PbrMetallicRoughness(
+                                       baseColorFactor=[float(c) for c in lin] + [1.0],
+                                       metallicFactor=0.0, roughnessFactor=1.0)))
+    targets = []
+    for d in deltas:
+        D = np.concatenate([d[loop], d[loop].mean(axis=0)[None]]).astype(np.float32)
+        targets.append(Attributes(POSITION=blob.morph_accessor(D, bounds=True)))
+    return [Primitive(attributes=Attributes(POSITION=blob.accessor(P, "VEC3", bounds=True)),
+                      indices=blob.accessor(fan.astype(np.uint32).reshape(-1, 1), "SCALAR",
+                                            target=_ELEMENTS),
+                      material=len(gltf.materials) - 1, targets=targets)]
 
 
 def _eyes(gltf, blob: _Blob, model, rig, unit: float) -> list[int]:
