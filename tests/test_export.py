@@ -317,6 +317,44 @@ def test_usd_blend_shapes_and_animation(case, tmp_path):
     assert pxr is not None
 
 
+def test_usd_eyeballs_are_skinned_to_eye_joints_that_turn_with_the_gaze(case, tmp_path):
+    """The USD's face had empty eye holes, as the glb's had. Now two eyeball meshes are bound to
+    joints ``head/eyeRight`` and ``head/eyeLeft``: skinned by UsdSkel itself at a frame, each
+    pupil (the sphere's front) lies at the head's pose of the eye's centre plus its radius along
+    the gaze the eyeLook* curves say (35 degrees a unit of In/Out, 28 of Up/Down)."""
+    pytest.importorskip("pxr", reason="usd-core is not installed (extra [usd])")
+    from pxr import Usd, UsdGeom, UsdSkel
+
+    from facetransfer.export.common import head_translation
+    from facetransfer.track.gaze import eye_model
+
+    model, track, a, _ = case
+    out = export_track(track, "usd", tmp_path / "face.usda", model=model)
+    stage = Usd.Stage.Open(str(out))
+    rest = np.array(stage.GetPrimAtPath("/Face/Mesh").GetAttribute("points").Get(), np.float64)
+    eyes = eye_model(rest[np.asarray(model.landmarks)])
+    cache = UsdSkel.Cache()
+    cache.Populate(UsdSkel.Root(stage.GetPrimAtPath("/Face")), Usd.PrimDefaultPredicate)
+    skq = cache.GetSkelQuery(UsdSkel.Skeleton(stage.GetPrimAtPath("/Face/Skel")))
+    assert list(skq.GetJointOrder()) == ["head", "head/eyeRight", "head/eyeLeft"]
+    h, v = np.deg2rad(35.0), np.deg2rad(28.0)
+    k = 7
+    R, T = np.asarray(track.rotation[k], np.float64), head_translation(track)[k]
+    for j, side in enumerate(("Right", "Left")):
+        prim = stage.GetPrimAtPath(f"/Face/eye{side}")
+        pts = UsdGeom.Mesh(prim).GetPointsAttr().Get()
+        front = int(np.argmax(np.array(pts)[:, 2]))
+        assert cache.GetSkinningQuery(prim).ComputeSkinnedPoints(
+            skq.ComputeSkinningTransforms(Usd.TimeCode(k)), pts, Usd.TimeCode(k))
+        col = {n: float(a[k, ARKIT_NAMES.index(f"{n}{side}")]) for n in
+               ("eyeLookIn", "eyeLookOut", "eyeLookUp", "eyeLookDown")}
+        yaw = (col["eyeLookIn"] - col["eyeLookOut"]) * h * (1.0 if side == "Right" else -1.0)
+        pitch = (col["eyeLookUp"] - col["eyeLookDown"]) * v
+        gaze = [np.sin(yaw) * np.cos(pitch), np.sin(pitch), np.cos(yaw) * np.cos(pitch)]
+        want = R @ (eyes.centre[j] + eyes.radius[j] * np.asarray(gaze)) + T
+        np.testing.assert_allclose(np.array(pts, np.float64)[front], want, atol=2e-4)
+
+
 def test_usd_posed_extents_are_each_frames_box(case):
     """posed_extents (the SkelRoot's extent per time code) against the rig's own faces
     (ExpressionRig.shape) rotated one frame at a time, at turned heads and full activations;

@@ -12,7 +12,9 @@ the sclera). The animation turns each by its ``rotation`` channel, one key a fra
 Rx(-pitch)`` of :func:`facetransfer.track.gaze.activation_gaze`'s angles (yaw toward the
 subject's left, +x; pitch up, +y), so +z, the pupil, points along
 :func:`facetransfer.track.gaze.gaze_direction`. The lids (the face's morph targets) close over
-them. Nodes ``eyeRight`` and ``eyeLeft``: the subject's own, as ARKit names them.
+them. Nodes ``eyeRight`` and ``eyeLeft``: the subject's own, as ARKit names them. The USD
+export (:mod:`facetransfer.export.usd`) has the same eyeballs, bound to joints of those names
+below its ``head``.
 """
 
 from __future__ import annotations

@@ -4,13 +4,17 @@ Layout (``usd-core``, the optional extra ``facetransfer[usd]``)::
 
     /Face                 SkelRoot (default prim); stage Y up, metersPerUnit 0.01 (model units);
                           extent per time code: the posed face's box (:func:`posed_extents`)
-      /Face/Skel          Skeleton, one joint "head"; skel:animationSource -> Anim
+      /Face/Skel          Skeleton, joints "head", "head/eyeRight", "head/eyeLeft" (the eyes'
+                          centres); skel:animationSource -> Anim
         /Face/Skel/Anim   SkelAnimation: blendShapes (52 ARKit names), blendShapeWeights,
-                          translations / rotations / scales of "head": one time sample per frame
+                          translations / rotations / scales of the joints: one time sample per
+                          frame (the eyes turned by the gaze, :mod:`.gltf_eyes`)
       /Face/Mesh          Mesh (neutral face and its extent, primvars:st), SkelBindingAPI:
                           skel:skeleton, skel:blendShapes + skel:blendShapeTargets, every
                           vertex on "head"
         /Face/Mesh/<name> BlendShape: offsets f_j - f_0 (pointIndices when sparse)
+      /Face/eyeRight      Mesh, the eyeball (displayColor), every vertex on "head/eyeRight"
+      /Face/eyeLeft       likewise on "head/eyeLeft" (no eyes for a model without landmarks)
 
 Time codes are frame numbers (``timeCodesPerSecond`` = the clip's fps): from 0, or, for a
 track of an image sequence numbered from N (a VFX plate's 1001), from N, so that the
@@ -135,24 +139,65 @@ def _root_extents(root, track, activations, rig, pxr, first: int) -> None:
         attr.Set(Vt.Vec3fArray.FromNumpy(box[k]), Usd.TimeCode(first + k))
 
 
-def _animation(stage, track, activations, pxr, first: int = 0):
+def _animation(stage, track, activations, pxr, first: int = 0, eyes=None):
+    """The SkelAnimation: the blend shapes' weights, the head joint's pose and, with ``eyes``
+    (:func:`facetransfer.export.gltf_eyes.eye_placement`), each eye joint's turn about its
+    centre (:func:`facetransfer.export.gltf_eyes.eye_rotations`)."""
+    from .gltf_eyes import eye_rotations
+
     Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = pxr
     anim = UsdSkel.Animation.Define(stage, "/Face/Skel/Anim")
-    anim.CreateJointsAttr(["head"])
+    anim.CreateJointsAttr(_joints(eyes))
     anim.CreateBlendShapesAttr(list(ARKIT_NAMES))
     w, tr, ro, sc = (anim.CreateBlendShapeWeightsAttr(), anim.CreateTranslationsAttr(),
                      anim.CreateRotationsAttr(), anim.CreateScalesAttr())
     T = head_translation(track).astype(np.float32)
-    Q = head_quaternions(track.rotation)
-    one = Vt.Vec3hArray([Gf.Vec3h(1, 1, 1)])
+    Q = head_quaternions(track.rotation)[:, None]
+    centres = [] if eyes is None else [Gf.Vec3f(*map(float, c)) for c in eyes[0]]
+    if eyes is not None:
+        Q = np.concatenate([Q, eye_rotations(activations)], axis=1)
+    one = Vt.Vec3hArray([Gf.Vec3h(1, 1, 1)] * Q.shape[1])
     for k in range(track.n_frames):
         t = Usd.TimeCode(first + k)
         w.Set(Vt.FloatArray.FromNumpy(activations[k].astype(np.float32)), t)
-        tr.Set(Vt.Vec3fArray([Gf.Vec3f(*map(float, T[k]))]), t)
-        x, y, z, r = (float(v) for v in Q[k])
-        ro.Set(Vt.QuatfArray([Gf.Quatf(r, x, y, z)]), t)
+        tr.Set(Vt.Vec3fArray([Gf.Vec3f(*map(float, T[k]))] + centres), t)
+        ro.Set(Vt.QuatfArray([Gf.Quatf(float(q[3]), float(q[0]), float(q[1]), float(q[2]))
+                              for q in Q[k]]), t)
         sc.Set(one, t)
     return anim
+
+
+def _joints(eyes) -> list[str]:
+    """The skeleton's joints: ``head``, and with eyes its children ``head/eyeRight``,
+    ``head/eyeLeft`` (:data:`facetransfer.export.gltf_eyes.EYE_NODES`)."""
+    from .gltf_eyes import EYE_NODES
+
+    return ["head"] + ([] if eyes is None else [f"head/{n}" for n in EYE_NODES])
+
+
+def _eyeballs(stage, skel, eyes, pxr) -> None:
+    """The eyeball meshes ``/Face/eyeRight``, ``/Face/eyeLeft``, each bound rigidly to its
+    joint (the sphere of :func:`facetransfer.export.gltf_eyes.eyeball_mesh` at the eye's centre
+    and radius, its colours as ``displayColor``)."""
+    from .gltf_eyes import EYE_NODES, eyeball_mesh
+
+    Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = pxr
+    P, C, T = eyeball_mesh()
+    for j, (name, centre, radius) in enumerate(zip(EYE_NODES, *eyes)):
+        mesh = UsdGeom.Mesh.Define(stage, f"/Face/{name}")
+        points = Vt.Vec3fArray.FromNumpy((P * radius + centre).astype(np.float32))
+        mesh.CreatePointsAttr(points)
+        mesh.CreateExtentAttr(UsdGeom.Mesh.ComputeExtent(points))
+        mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(T) // 3, 3, np.int32)))
+        mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(T.ravel().astype(np.int32)))
+        mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
+        mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+        mesh.CreateDisplayColorPrimvar(UsdGeom.Tokens.vertex).Set(Vt.Vec3fArray.FromNumpy(C))
+        binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
+        binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
+        binding.CreateJointIndicesPrimvar(True, 1).Set(Vt.IntArray([j + 1]))
+        binding.CreateJointWeightsPrimvar(True, 1).Set(Vt.FloatArray([1.0]))
+        binding.CreateGeomBindTransformAttr(Gf.Matrix4d(1))
 
 
 def write_usd(track, model, out: str | os.PathLike, *, overwrite: bool = False,
@@ -175,11 +220,16 @@ def write_usd(track, model, out: str | os.PathLike, *, overwrite: bool = False,
     stage.SetEndTimeCode(first_frame + track.n_frames - 1)
     root = UsdSkel.Root.Define(stage, "/Face")
     stage.SetDefaultPrim(root.GetPrim())
+    from .gltf_eyes import eye_placement
+
+    eyes = eye_placement(model, rig.neutral)
     skel = UsdSkel.Skeleton.Define(stage, "/Face/Skel")
-    skel.CreateJointsAttr(["head"])
-    skel.CreateBindTransformsAttr(Vt.Matrix4dArray([Gf.Matrix4d(1)]))
-    skel.CreateRestTransformsAttr(Vt.Matrix4dArray([Gf.Matrix4d(1)]))
-    anim = _animation(stage, track, a, pxr, int(first_frame))
+    skel.CreateJointsAttr(_joints(eyes))
+    at = [Gf.Matrix4d(1)] + ([] if eyes is None else [
+        Gf.Matrix4d(1).SetTranslate(Gf.Vec3d(*map(float, c))) for c in eyes[0]])
+    skel.CreateBindTransformsAttr(Vt.Matrix4dArray(at))   # the eyes' centres, in the head's
+    skel.CreateRestTransformsAttr(Vt.Matrix4dArray(at))   # frame: world = local below head
+    anim = _animation(stage, track, a, pxr, int(first_frame), eyes)
     UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets(
         [anim.GetPath()])
     mesh = _mesh(stage, rig, model, pxr)
@@ -191,6 +241,8 @@ def write_usd(track, model, out: str | os.PathLike, *, overwrite: bool = False,
     binding.CreateGeomBindTransformAttr(Gf.Matrix4d(1))
     binding.CreateBlendShapesAttr(list(ARKIT_NAMES))
     binding.CreateBlendShapeTargetsRel().SetTargets(_blend_shapes(stage, mesh, rig, pxr))
+    if eyes is not None:
+        _eyeballs(stage, skel, eyes, pxr)
     meta = {"source": source_name(track.source), "generator": "facetransfer"}
     stage.GetRootLayer().customLayerData = meta if timecode is None else \
         {**meta, "timecode": str(timecode)}
