@@ -355,6 +355,44 @@ def test_usd_eyeballs_are_skinned_to_eye_joints_that_turn_with_the_gaze(case, tm
         np.testing.assert_allclose(np.array(pts, np.float64)[front], want, atol=2e-4)
 
 
+def test_usd_mouth_inside_follows_the_lips(case, tmp_path):
+    """The USD's lips' gap was open onto what is behind the head, as the glb's was. Now a mesh
+    ``/Face/mouthInside`` on the head joint closes it, a cone whose 52 blend shapes move its
+    rim with the lips: with the file's own offsets and a frame's weights, each rim point is a
+    point of the face's boundary, in order, and the cone's tip lies behind them."""
+    pytest.importorskip("pxr", reason="usd-core is not installed (extra [usd])")
+    from pxr import Usd, UsdGeom, UsdSkel
+
+    def posed(prim, w):
+        pts = np.array(UsdGeom.Mesh(prim).GetPointsAttr().Get(), np.float64)
+        for name, x in zip(ARKIT_NAMES, w):
+            bs = UsdSkel.BlendShape(prim.GetChild(name))
+            idx = bs.GetPointIndicesAttr().Get()
+            rows = np.arange(len(pts)) if idx is None else np.array(idx)
+            pts[rows] += x * np.array(bs.GetOffsetsAttr().Get(), np.float64)
+        return pts
+
+    model, track, a, _ = case
+    stage = Usd.Stage.Open(str(export_track(track, "usd", tmp_path / "f.usda", model=model)))
+    face, inside = stage.GetPrimAtPath("/Face/Mesh"), stage.GetPrimAtPath("/Face/mouthInside")
+    assert inside.IsValid() and [str(t) for t in UsdSkel.BindingAPI(inside)
+                                 .GetSkeletonRel().GetTargets()] == ["/Face/Skel"]
+    F = np.array(UsdGeom.Mesh(face).GetFaceVertexIndicesAttr().Get()).reshape(-1, 3)
+    edges = {}
+    for tri in F:
+        for u, v in ((tri[0], tri[1]), (tri[1], tri[2]), (tri[2], tri[0])):
+            edges[frozenset((int(u), int(v)))] = edges.get(frozenset((int(u), int(v))), 0) + 1
+    for w in (np.zeros(52), a[5].astype(np.float64)):
+        V, C = posed(face, w), posed(inside, w)
+        k = len(C) - 1
+        d = np.linalg.norm(V[None] - C[:k, None], axis=2)
+        rim = d.argmin(axis=1)
+        assert k > 8 and d.min(axis=1).max() < 1e-4                  # cm, float32
+        assert all(edges.get(frozenset((int(rim[i]), int(rim[(i + 1) % k])))) == 1
+                   for i in range(k))
+        assert C[k, 2] < C[:k, 2].min()
+
+
 def test_usd_posed_extents_are_each_frames_box(case):
     """posed_extents (the SkelRoot's extent per time code) against the rig's own faces
     (ExpressionRig.shape) rotated one frame at a time, at turned heads and full activations;

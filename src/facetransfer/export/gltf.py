@@ -48,7 +48,7 @@ from .common import (ExportError, head_quaternions, head_translation, identity_r
                      require_activations, source_name)
 
 __all__ = ["METRES_PER_UNIT", "write_glb", "texture_image", "texture_png",
-           "lift_clip_texture", "check_texture_video", "morph_encoding"]
+           "lift_clip_texture", "check_texture_video", "morph_encoding", "mouth_cone"]
 
 #: Model units to metres (the ICT-FaceKit is in centimetres).
 METRES_PER_UNIT = 0.01
@@ -303,6 +303,34 @@ def _mesh(gltf, blob: _Blob, rig, model, unit: float, material: int) -> None:
                             extras={"targetNames": list(ARKIT_NAMES)}))
 
 
+def mouth_cone(model, neutral: np.ndarray, deltas: list):
+    """The mouth's inside as the `view` page closes it: a cone from the inner lips' loop
+    (:func:`facetransfer.topology.mesh_topology`) to a point behind its middle by
+    :data:`facetransfer.export.viewer.CAVITY_DEPTH` of its width.
+
+    Returns
+    -------
+    tuple or None
+        ``(points (k+1, 3) float32, fan (k, 3) int64, [deltas (k+1, 3) float32 per shape])``:
+        the loop's points and the point behind, the triangles (facing out of the face), and
+        per shape of ``deltas`` (each ``(n, 3)``, the face's) the loop's own deltas and their
+        mean for the point; None without a mouth gap.
+    """
+    from ..topology import mesh_topology
+    from .viewer import CAVITY_DEPTH
+
+    loop = mesh_topology(model).mouth_loop
+    if loop.size == 0:
+        return None
+    rim = np.asarray(neutral, np.float64)[loop]
+    apex = rim.mean(axis=0) - [0.0, 0.0, CAVITY_DEPTH["mouth"] * np.ptp(rim[:, 0])]
+    k = len(loop)
+    fan = np.stack([np.roll(np.arange(k), -1), np.arange(k), np.full(k, k)], axis=1)
+    moved = [np.concatenate([d[loop], d[loop].mean(axis=0)[None]]).astype(np.float32)
+             for d in deltas]
+    return np.concatenate([rim, apex[None]]).astype(np.float32), fan, moved
+
+
 def _mouth_inside(gltf, blob: _Blob, model, V: np.ndarray, deltas: list) -> list:
     """The mouth's inside, a second primitive of the face mesh (none without a mouth gap): a
     cone from the inner lips' loop (:func:`facetransfer.topology.mesh_topology`) to a point
@@ -313,27 +341,18 @@ def _mouth_inside(gltf, blob: _Blob, model, V: np.ndarray, deltas: list) -> list
     from pygltflib import Attributes, Material, PbrMetallicRoughness, Primitive
 
     from ..palette import PALETTE
-    from ..topology import mesh_topology
-    from .viewer import CAVITY_DEPTH
 
-    loop = mesh_topology(model).mouth_loop
-    if loop.size == 0:
+    cone = mouth_cone(model, V, deltas)
+    if cone is None:
         return []
-    rim = V[loop].astype(np.float64)
-    apex = rim.mean(axis=0) - [0.0, 0.0, CAVITY_DEPTH["mouth"] * np.ptp(rim[:, 0])]
-    P = np.concatenate([rim, apex[None]]).astype(np.float32)
-    k = len(loop)
-    fan = np.stack([np.roll(np.arange(k), -1), np.arange(k), np.full(k, k)], axis=1)
+    P, fan, cone_deltas = cone
     srgb = np.asarray(PALETTE["cavity"], np.float64) / 255.0
     lin = np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
     gltf.materials.append(Material(name="mouth", doubleSided=True,
                                    pbrMetallicRoughness=PbrMetallicRoughness(
                                        baseColorFactor=[float(c) for c in lin] + [1.0],
                                        metallicFactor=0.0, roughnessFactor=1.0)))
-    targets = []
-    for d in deltas:
-        D = np.concatenate([d[loop], d[loop].mean(axis=0)[None]]).astype(np.float32)
-        targets.append(Attributes(POSITION=blob.morph_accessor(D, bounds=True)))
+    targets = [Attributes(POSITION=blob.morph_accessor(D, bounds=True)) for D in cone_deltas]
     return [Primitive(attributes=Attributes(POSITION=blob.accessor(P, "VEC3", bounds=True)),
                       indices=blob.accessor(fan.astype(np.uint32).reshape(-1, 1), "SCALAR",
                                             target=_ELEMENTS),

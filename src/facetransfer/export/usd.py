@@ -15,6 +15,8 @@ Layout (``usd-core``, the optional extra ``facetransfer[usd]``)::
         /Face/Mesh/<name> BlendShape: offsets f_j - f_0 (pointIndices when sparse)
       /Face/eyeRight      Mesh, the eyeball (displayColor), every vertex on "head/eyeRight"
       /Face/eyeLeft       likewise on "head/eyeLeft" (no eyes for a model without landmarks)
+      /Face/mouthInside   Mesh, the mouth's inside (:func:`.gltf.mouth_cone`) on "head", with
+                          its own 52 BlendShape prims (the lips' deltas)
 
 Time codes are frame numbers (``timeCodesPerSecond`` = the clip's fps): from 0, or, for a
 track of an image sequence numbered from N (a VFX plate's 1001), from N, so that the
@@ -69,10 +71,11 @@ def _mesh(stage, rig, model, pxr):
     return mesh
 
 
-def _blend_shapes(stage, mesh, rig, pxr):
+def _blend_shapes(stage, mesh, deltas, pxr):
+    """A ``BlendShape`` prim under ``mesh`` per ARKit name, of ``deltas`` (52 of ``(n, 3)``)."""
     Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = pxr
     paths = []
-    for name, d in zip(ARKIT_NAMES, rig.deltas):
+    for name, d in zip(ARKIT_NAMES, deltas):
         bs = UsdSkel.BlendShape.Define(stage, mesh.GetPath().AppendChild(name))
         idx = np.flatnonzero(np.any(d != 0, axis=1)).astype(np.int32)
         if idx.size == 0:  # a shape the model lacks (tongueOut): one zero offset
@@ -167,6 +170,40 @@ def _animation(stage, track, activations, pxr, first: int = 0, eyes=None):
     return anim
 
 
+def _mouth_inside(stage, skel, rig, model, pxr) -> None:
+    """The mouth's inside, ``/Face/mouthInside`` (none without a mouth gap): the glb's cone
+    (:func:`facetransfer.export.gltf.mouth_cone`) in the page's cavity colour, on "head", with
+    52 blend shapes of its own (the lips' deltas), so an open jaw opens onto it."""
+    from ..palette import PALETTE
+    from .gltf import mouth_cone
+
+    Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = pxr
+    cone = mouth_cone(model, rig.neutral, list(rig.deltas))
+    if cone is None:
+        return
+    P, fan, deltas = cone
+    mesh = UsdGeom.Mesh.Define(stage, "/Face/mouthInside")
+    points = Vt.Vec3fArray.FromNumpy(P)
+    mesh.CreatePointsAttr(points)
+    mesh.CreateExtentAttr(UsdGeom.Mesh.ComputeExtent(points))
+    mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(fan), 3, np.int32)))
+    mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(fan.ravel().astype(np.int32)))
+    mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
+    mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    mesh.CreateDoubleSidedAttr(True)
+    srgb = np.asarray(PALETTE["cavity"], np.float64) / 255.0
+    lin = np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
+    mesh.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(
+        Vt.Vec3fArray([Gf.Vec3f(*map(float, lin))]))
+    binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
+    binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
+    binding.CreateJointIndicesPrimvar(True, 1).Set(Vt.IntArray([0]))
+    binding.CreateJointWeightsPrimvar(True, 1).Set(Vt.FloatArray([1.0]))
+    binding.CreateGeomBindTransformAttr(Gf.Matrix4d(1))
+    binding.CreateBlendShapesAttr(list(ARKIT_NAMES))
+    binding.CreateBlendShapeTargetsRel().SetTargets(_blend_shapes(stage, mesh, deltas, pxr))
+
+
 def _joints(eyes) -> list[str]:
     """The skeleton's joints: ``head``, and with eyes its children ``head/eyeRight``,
     ``head/eyeLeft`` (:data:`facetransfer.export.gltf_eyes.EYE_NODES`)."""
@@ -240,9 +277,10 @@ def write_usd(track, model, out: str | os.PathLike, *, overwrite: bool = False,
     binding.CreateJointWeightsPrimvar(True, 1).Set(Vt.FloatArray([1.0]))
     binding.CreateGeomBindTransformAttr(Gf.Matrix4d(1))
     binding.CreateBlendShapesAttr(list(ARKIT_NAMES))
-    binding.CreateBlendShapeTargetsRel().SetTargets(_blend_shapes(stage, mesh, rig, pxr))
+    binding.CreateBlendShapeTargetsRel().SetTargets(_blend_shapes(stage, mesh, rig.deltas, pxr))
     if eyes is not None:
         _eyeballs(stage, skel, eyes, pxr)
+    _mouth_inside(stage, skel, rig, model, pxr)
     meta = {"source": source_name(track.source), "generator": "facetransfer"}
     stage.GetRootLayer().customLayerData = meta if timecode is None else \
         {**meta, "timecode": str(timecode)}
