@@ -54,17 +54,12 @@ def check_output_suffix(path: str | os.PathLike, suffixes, what: str, *, flag: s
     Raises
     ------
     OutputError
-        ``"--out take.mp4: a track is written as .npz, not .mp4; name it take.npz"``; an
-        existing folder: ``"--out tracks is a folder; give a file name in it
-        (tracks/NAME.npz)"``.
+        ``"--out take.mp4: a track is written as .npz, not .mp4; name it take.npz"``.
     """
     p = Path(path)
     suffix = p.suffix.lower()
     if suffix in suffixes:
         return p
-    if p.is_dir():          # not "name it out.npz" (beside the folder) for --out out/
-        raise OutputError(f"{flag} {p} is a folder; give a file name in it "
-                          f"({p / ('NAME' + suffixes[0])})")
     said = f"not {p.suffix}" if p.suffix else "and the name has no extension"
     name = p.with_suffix(suffixes[0]).name if p.name not in ("", ".", "..") else None
     raise OutputError(f"{flag} {p}: {what} is written as {suffix_list(suffixes)}, {said}"
