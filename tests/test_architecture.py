@@ -189,6 +189,7 @@ LAYER_OF = {
     "facetransfer.palette": "base",      # the colours of the eyeballs and the mouth's inside
     "facetransfer.assets": "base",
     "facetransfer.default_model": "base",
+    "facetransfer.model_hint": "base",   # a refusal's way to the model a file was made with
     "facetransfer.datasets": "base",
     "facetransfer.impute": "base",
     "facetransfer.correspond": "base",

@@ -801,3 +801,24 @@ def test_no_help_states_an_empty_or_missing_default():
     assert silent == []
     speed = helps["facetransfer transfer"].format_help().split("--speed")[-1]
     assert "(default: fast)" in " ".join(speed.split())
+
+
+@pytest.mark.parametrize("argv, ext", [
+    (["edit", "t.npz", "--scale", "jawOpen=2", "--out", "FOLDER"], ".npz"),
+    (["edit", "t.npz", "--add", "blink@1-2", "--out", "FOLDER/"], ".npz"),
+    (["view", "t.npz", "--out", "FOLDER"], ".html"),
+    (["track", "clip.mp4", "--out", "FOLDER"], ".npz"),
+])
+def test_an_existing_folder_as_the_output_is_said_to_be_one(argv, ext, tmp_path, monkeypatch,
+                                                            capsys):
+    """``edit T.npz --out out/`` said "a track is written as .npz, and the name has no
+    extension; name it out.npz": a file beside the folder the user meant to write into. Now the
+    line says the output is a folder and names a file in it, before any input is read."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "FOLDER").mkdir()
+    assert main(argv) == 2
+    err = _err(capsys)
+    assert err == [f"facetransfer {argv[0]}: error: --out FOLDER is a folder; give a file name "
+                   f"in it (FOLDER/NAME{ext})"], err
+    assert [p.name for p in tmp_path.iterdir()] == ["FOLDER"]
+    assert list((tmp_path / "FOLDER").iterdir()) == []

@@ -360,3 +360,39 @@ def test_a_command_started_while_another_builds_the_default_model_waits_and_take
     assert said == [f"waiting for another command building the default model into "
                     f"{path.parent}"]
     assert model.provenance["default_model"] and dm._recorded(model) == dm._recipe()
+
+
+def test_a_file_made_with_this_default_model_given_another_model_says_leave_out_model(
+        tmp_path, monkeypatch, quick_model, quick_ict_dataset, quick_track):
+    """A track made with the default model, exported with ``--model other.npz`` by mistake, was
+    refused with "made with the default model of another version, kept at P: give --model P"
+    wherever the cache kept an older recipe's file of the same model (a code change that does
+    not change the model leaves one): the user was sent to a cache file for the model the
+    command loads by itself. Now the refusal says to leave out --model; a kept file of another
+    model is still named."""
+    import dataclasses
+
+    import facetransfer.datasets as datasets
+    from facetransfer.errors import TrackError
+    from facetransfer.model_hint import current_default_hash, model_hint
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    monkeypatch.setattr(datasets, "load_dataset", lambda name, progress=None, **kw:
+                        quick_ict_dataset)
+    dm._recipe.cache_clear()
+    now = dm.load_default_model()
+    older = dm.default_model_path().with_name("ict-arkit-default-v1.npz")
+    older.write_bytes(dm.default_model_path().read_bytes())    # the same model, kept
+    assert dm.kept_model(now.content_hash) == older
+    mine = dataclasses.replace(quick_track, model_hash=now.content_hash)
+    with pytest.raises(TrackError) as err:
+        mine.check_model(quick_model)
+    assert str(err.value).endswith(" (made with the default model: leave out --model)")
+    assert "kept at" not in str(err.value)
+    assert current_default_hash() == now.content_hash
+    other = dm.default_model_path().with_name("ict-arkit-default-v1-0123456789abcdef.npz")
+    quick_model.save(other)               # another version's default model, kept
+    assert model_hint(quick_model.content_hash) == (
+        f" (made with the default model of another version, kept at {other}: give --model "
+        f"{other})")
+    dm._recipe.cache_clear()

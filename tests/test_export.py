@@ -157,6 +157,81 @@ def _read_accessor(g, i: int) -> np.ndarray:
     return out
 
 
+def test_glb_eyeballs_sit_behind_the_eye_holes_and_turn_with_the_gaze(case, tmp_path):
+    """The glb's face has holes where the eyes are, and nothing behind them: Blender, Unreal or
+    three.js showed the head's inside through them (the `view` page and the puppet draw an
+    eyeball there). Now two eyeball nodes, children of the face, sit where the gaze model puts
+    them on the file's own neutral face, and the animation turns each so that its pupil (+z)
+    looks where the eyeLook* curves say (35 degrees a unit of In/Out, 28 of Up/Down)."""
+    from pygltflib import GLTF2
+    from scipy.spatial.transform import Rotation
+
+    from facetransfer.track.gaze import eye_model
+
+    model, track, a, _ = case
+    out = export_track(track, "glb", tmp_path / "face.glb", model=model)
+    g = GLTF2().load(str(out))
+    assert [n.name for n in g.nodes] == ["face", "eyeRight", "eyeLeft"]
+    assert g.nodes[0].children == [1, 2] and g.scenes[0].nodes == [0]
+    rest = _read_accessor(g, g.meshes[0].primitives[0].attributes.POSITION).astype(np.float64)
+    eyes = eye_model(rest[np.asarray(model.landmarks)] / 0.01)   # the file's face, in cm
+    col = {n: a[:, ARKIT_NAMES.index(n)].astype(np.float64) for n in ARKIT_NAMES}
+    h, v = np.deg2rad(35.0), np.deg2rad(28.0)
+    chans = {c.target.node: c.sampler for c in g.animations[0].channels
+             if c.target.path == "rotation"}
+    for k, side in enumerate(("Right", "Left")):
+        node = g.nodes[1 + k]
+        np.testing.assert_allclose(node.translation, eyes.centre[k] * 0.01, atol=1e-6)
+        np.testing.assert_allclose(node.scale, [eyes.radius[k] * 0.01] * 3, rtol=1e-6)
+        inward = col[f"eyeLookIn{side}"] - col[f"eyeLookOut{side}"]
+        yaw = inward * h * (1.0 if side == "Right" else -1.0)   # + toward the subject's left
+        pitch = (col[f"eyeLookUp{side}"] - col[f"eyeLookDown{side}"]) * v
+        want = np.stack([np.sin(yaw) * np.cos(pitch), np.sin(pitch),
+                         np.cos(yaw) * np.cos(pitch)], -1)
+        q = _read_accessor(g, g.animations[0].samplers[chans[1 + k]].output).astype(np.float64)
+        np.testing.assert_allclose(Rotation.from_quat(q).apply([0.0, 0.0, 1.0]), want, atol=1e-6)
+    prim = g.meshes[g.nodes[1].mesh].primitives[0]
+    P = _read_accessor(g, prim.attributes.POSITION)
+    C = _read_accessor(g, prim.attributes.COLOR_0)
+    np.testing.assert_allclose(np.linalg.norm(P, axis=1), 1.0, atol=1e-6)
+    dark = C.sum(axis=1) < 0.05                     # the pupil, at the sphere's front (+z)
+    assert dark.any() and P[dark, 2].min() > 0.9 and (P[:, 2] < -0.9).any()
+    issues = _validate(out)  # last: skips when node or the validator is absent
+    assert issues["numErrors"] == 0 and issues["numWarnings"] == 0, issues["messages"]
+
+
+def test_glb_mouth_opens_onto_its_inside_not_what_is_behind_the_head(case, tmp_path):
+    """The face's mouth is a hole in the mesh: an open jaw showed the background (or the head's
+    inside) through it in a player. Now the face mesh has a second primitive, a cone from the
+    inner lips' loop to a point behind it in the cavity's colour, whose morph targets move its
+    rim with the lips: at any weights its rim is the lips' own boundary."""
+    from pygltflib import GLTF2
+
+    model, track, a, _ = case
+    out = export_track(track, "glb", tmp_path / "face.glb", model=model)
+    g = GLTF2().load(str(out))
+    skin, inside = g.meshes[0].primitives            # the face mesh: skin, mouth's inside
+    F = _read_accessor(g, skin.indices).reshape(-1, 3)
+    fan = _read_accessor(g, inside.indices).reshape(-1, 3)
+    k = len(fan)
+    assert k > 8 and set(fan[:, 2]) == {k} and g.materials[inside.material].doubleSided
+    edges = {}
+    for tri in F:
+        for u, v in ((tri[0], tri[1]), (tri[1], tri[2]), (tri[2], tri[0])):
+            edges[frozenset((int(u), int(v)))] = edges.get(frozenset((int(u), int(v))), 0) + 1
+    for w in (np.zeros(52), a[3].astype(np.float64)):
+        face = _read_accessor(g, skin.attributes.POSITION).astype(np.float64) + np.tensordot(
+            w, np.stack([_read_accessor(g, t["POSITION"]) for t in skin.targets]), 1)
+        cone = _read_accessor(g, inside.attributes.POSITION).astype(np.float64) + np.tensordot(
+            w, np.stack([_read_accessor(g, t["POSITION"]) for t in inside.targets]), 1)
+        d = np.linalg.norm(face[None] - cone[:k, None], axis=2)
+        rim = d.argmin(axis=1)                        # the face's vertex under each rim vertex
+        assert d.min(axis=1).max() < 1e-6
+        assert all(edges.get(frozenset((int(rim[i]), int(rim[(i + 1) % k])))) == 1
+                   for i in range(k))                 # in order along the mesh's boundary
+        assert cone[k, 2] < cone[:k, 2].min()         # the point behind the lips
+
+
 def test_glb_morph_targets_and_animation(case, tmp_path):
     import pygltflib
     import trimesh
@@ -174,7 +249,7 @@ def test_glb_morph_targets_and_animation(case, tmp_path):
     assert len(prim.targets) == 52 and g.images and g.materials[0].pbrMetallicRoughness \
         .baseColorTexture.index == 0
     anim = g.animations[0]
-    paths = {c.target.path: c.sampler for c in anim.channels}
+    paths = {c.target.path: c.sampler for c in anim.channels if c.target.node == 0}  # the face's
     assert set(paths) == {"weights", "rotation", "translation"}
     times = _read_accessor(g, anim.samplers[paths["weights"]].input)[:, 0]
     np.testing.assert_allclose(times, np.arange(track.n_frames) / track.fps, atol=1e-6)
@@ -189,7 +264,7 @@ def test_glb_morph_targets_and_animation(case, tmp_path):
     want = model.synthesize(track.weights_at(k)) * 0.01  # metres
     np.testing.assert_allclose(V0 + np.tensordot(a[k].astype(np.float64), T, 1), want,
                                atol=2e-6)
-    tm = trimesh.load(out, force="mesh", process=False)
+    tm = trimesh.load(out, force="scene", process=False).geometry["face"]   # the eyes apart
     assert len(tm.vertices) == model.n_vertices and len(tm.faces) == len(model.faces)
     issues = _validate(out)  # last: skips when node or the validator is absent
     assert issues["numErrors"] == 0 and issues["numWarnings"] == 0, issues["messages"]
@@ -240,6 +315,82 @@ def test_usd_blend_shapes_and_animation(case, tmp_path):
     errors = ctx.Validate(stage)
     assert not errors, [e.GetMessage() for e in errors]
     assert pxr is not None
+
+
+def test_usd_eyeballs_are_skinned_to_eye_joints_that_turn_with_the_gaze(case, tmp_path):
+    """The USD's face had empty eye holes, as the glb's had. Now two eyeball meshes are bound to
+    joints ``head/eyeRight`` and ``head/eyeLeft``: skinned by UsdSkel itself at a frame, each
+    pupil (the sphere's front) lies at the head's pose of the eye's centre plus its radius along
+    the gaze the eyeLook* curves say (35 degrees a unit of In/Out, 28 of Up/Down)."""
+    pytest.importorskip("pxr", reason="usd-core is not installed (extra [usd])")
+    from pxr import Usd, UsdGeom, UsdSkel
+
+    from facetransfer.export.common import head_translation
+    from facetransfer.track.gaze import eye_model
+
+    model, track, a, _ = case
+    out = export_track(track, "usd", tmp_path / "face.usda", model=model)
+    stage = Usd.Stage.Open(str(out))
+    rest = np.array(stage.GetPrimAtPath("/Face/Mesh").GetAttribute("points").Get(), np.float64)
+    eyes = eye_model(rest[np.asarray(model.landmarks)])
+    cache = UsdSkel.Cache()
+    cache.Populate(UsdSkel.Root(stage.GetPrimAtPath("/Face")), Usd.PrimDefaultPredicate)
+    skq = cache.GetSkelQuery(UsdSkel.Skeleton(stage.GetPrimAtPath("/Face/Skel")))
+    assert list(skq.GetJointOrder()) == ["head", "head/eyeRight", "head/eyeLeft"]
+    h, v = np.deg2rad(35.0), np.deg2rad(28.0)
+    k = 7
+    R, T = np.asarray(track.rotation[k], np.float64), head_translation(track)[k]
+    for j, side in enumerate(("Right", "Left")):
+        prim = stage.GetPrimAtPath(f"/Face/eye{side}")
+        pts = UsdGeom.Mesh(prim).GetPointsAttr().Get()
+        front = int(np.argmax(np.array(pts)[:, 2]))
+        assert cache.GetSkinningQuery(prim).ComputeSkinnedPoints(
+            skq.ComputeSkinningTransforms(Usd.TimeCode(k)), pts, Usd.TimeCode(k))
+        col = {n: float(a[k, ARKIT_NAMES.index(f"{n}{side}")]) for n in
+               ("eyeLookIn", "eyeLookOut", "eyeLookUp", "eyeLookDown")}
+        yaw = (col["eyeLookIn"] - col["eyeLookOut"]) * h * (1.0 if side == "Right" else -1.0)
+        pitch = (col["eyeLookUp"] - col["eyeLookDown"]) * v
+        gaze = [np.sin(yaw) * np.cos(pitch), np.sin(pitch), np.cos(yaw) * np.cos(pitch)]
+        want = R @ (eyes.centre[j] + eyes.radius[j] * np.asarray(gaze)) + T
+        np.testing.assert_allclose(np.array(pts, np.float64)[front], want, atol=2e-4)
+
+
+def test_usd_mouth_inside_follows_the_lips(case, tmp_path):
+    """The USD's lips' gap was open onto what is behind the head, as the glb's was. Now a mesh
+    ``/Face/mouthInside`` on the head joint closes it, a cone whose 52 blend shapes move its
+    rim with the lips: with the file's own offsets and a frame's weights, each rim point is a
+    point of the face's boundary, in order, and the cone's tip lies behind them."""
+    pytest.importorskip("pxr", reason="usd-core is not installed (extra [usd])")
+    from pxr import Usd, UsdGeom, UsdSkel
+
+    def posed(prim, w):
+        pts = np.array(UsdGeom.Mesh(prim).GetPointsAttr().Get(), np.float64)
+        for name, x in zip(ARKIT_NAMES, w):
+            bs = UsdSkel.BlendShape(prim.GetChild(name))
+            idx = bs.GetPointIndicesAttr().Get()
+            rows = np.arange(len(pts)) if idx is None else np.array(idx)
+            pts[rows] += x * np.array(bs.GetOffsetsAttr().Get(), np.float64)
+        return pts
+
+    model, track, a, _ = case
+    stage = Usd.Stage.Open(str(export_track(track, "usd", tmp_path / "f.usda", model=model)))
+    face, inside = stage.GetPrimAtPath("/Face/Mesh"), stage.GetPrimAtPath("/Face/mouthInside")
+    assert inside.IsValid() and [str(t) for t in UsdSkel.BindingAPI(inside)
+                                 .GetSkeletonRel().GetTargets()] == ["/Face/Skel"]
+    F = np.array(UsdGeom.Mesh(face).GetFaceVertexIndicesAttr().Get()).reshape(-1, 3)
+    edges = {}
+    for tri in F:
+        for u, v in ((tri[0], tri[1]), (tri[1], tri[2]), (tri[2], tri[0])):
+            edges[frozenset((int(u), int(v)))] = edges.get(frozenset((int(u), int(v))), 0) + 1
+    for w in (np.zeros(52), a[5].astype(np.float64)):
+        V, C = posed(face, w), posed(inside, w)
+        k = len(C) - 1
+        d = np.linalg.norm(V[None] - C[:k, None], axis=2)
+        rim = d.argmin(axis=1)
+        assert k > 8 and d.min(axis=1).max() < 1e-4                  # cm, float32
+        assert all(edges.get(frozenset((int(rim[i]), int(rim[(i + 1) % k])))) == 1
+                   for i in range(k))
+        assert C[k, 2] < C[:k, 2].min()
 
 
 def test_usd_posed_extents_are_each_frames_box(case):

@@ -47,7 +47,8 @@ def _usd_shows(path, times, *, first: int = 0) -> dict:
     cache.Populate(root, Usd.PrimDefaultPredicate)
     (binding,) = cache.ComputeSkelBindings(root, Usd.PrimDefaultPredicate)
     skel = cache.GetSkelQuery(binding.GetSkeleton())
-    (skin,) = binding.GetSkinningTargets()
+    (skin,) = [s for s in binding.GetSkinningTargets()        # the face's, not the eyes'
+               if s.GetPrim().GetPath() == "/Face/Mesh"]         # or the mouth's inside
     shapes = UsdSkel.BlendShapeQuery(UsdSkel.BindingAPI(skin.GetPrim()))
     indices, offsets = shapes.ComputeBlendShapePointIndices(), shapes.ComputeSubShapePointOffsets()
     mesh, mapper = UsdGeom.Mesh(skin.GetPrim()), skin.GetBlendShapeMapper()

@@ -224,11 +224,11 @@ def face_weights(face: DialledFace, model) -> dict[str, np.ndarray]:
     from .dials import neutral_weights
 
     if face.model_hash and face.model_hash != model.content_hash:
-        from .default_model import kept_model_hint
+        from .model_hint import model_hint
 
         raise FaceFileError(f"{face.path} was dialled on another model (content hash "
                             f"{face.model_hash[:12]}, this one {model.content_hash[:12]})" + (
-                                kept_model_hint(face.model_hash)
+                                model_hint(face.model_hash)
                                 or ": give the model its page was written from"))
     mode, identity = _identity(face, model)
     weights = {**neutral_weights(model, mode), mode: identity}

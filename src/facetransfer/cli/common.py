@@ -303,14 +303,32 @@ def check_track_of(track, path, video, n_frames: int, size, purpose: str) -> Non
     track.check_video(n_frames, size, what=f"video {video}")
 
 
-def check_track_name(path, flag: str = "--out", *, overlay: bool = False) -> None:
-    """A track file's name ends in .npz (:func:`facetransfer.io.output_names.
-    check_output_suffix`); with ``overlay`` (``track``), a video's name is pointed to
-    ``--overlay``."""
+def check_output_name(path, suffixes, what: str, *, flag: str = "--out", hint: str = "") -> Path:
+    """:func:`facetransfer.io.output_names.check_output_suffix`, an existing folder first
+    refused as one: ``edit T.npz --out out/`` was told "the name has no extension; name it
+    out.npz", a file beside the folder meant.
+
+    Raises
+    ------
+    OutputError
+        ``"--out tracks is a folder; give a file name in it (tracks/NAME.npz)"``, or as
+        :func:`~facetransfer.io.output_names.check_output_suffix`.
+    """
+    from ..errors import OutputError
     from ..io.output_names import check_output_suffix
 
+    p = Path(path)
+    if p.is_dir():
+        raise OutputError(f"{flag} {p} is a folder; give a file name in it "
+                          f"({p / ('NAME' + suffixes[0])})")
+    return check_output_suffix(path, suffixes, what, flag=flag, hint=hint)
+
+
+def check_track_name(path, flag: str = "--out", *, overlay: bool = False) -> None:
+    """A track file's name ends in .npz (:func:`check_output_name`); with ``overlay``
+    (``track``), a video's name is pointed to ``--overlay``."""
     video = overlay and Path(path).suffix.lower() in VIDEO_SUFFIXES
-    check_output_suffix(path, (".npz",), "a track", flag=flag,
+    check_output_name(path, (".npz",), "a track", flag=flag,
                         hint=" (--overlay writes a video of the fitted mesh over the clip)"
                         if video else "")
 

@@ -140,7 +140,7 @@ def _check_take(args) -> None:
     ``--overwrite``) or the take itself."""
     from ..io.atomic import check_output_path
     from ..io.npz import check_input_file
-    from ..io.output_names import check_output_suffix
+    from .common import check_output_name
 
     take = args.track
     if args.identity_dials:
@@ -150,9 +150,9 @@ def _check_take(args) -> None:
         raise FaceTransferError(f"--model: {take} is a Live Link Face take, whose ARKit curves "
                                 "are edited without a model; leave --model out")
     check_input_file(take, "take")
-    check_output_suffix(args.out, (".csv",), "an edited take",
-                        hint=f" (an edit of the take {take} is a take; a track is made from "
-                        "a video with `facetransfer track`)")
+    check_output_name(args.out, (".csv",), "an edited take",
+                      hint=f" (an edit of the take {take} is a take; a track is made from "
+                      "a video with `facetransfer track`)")
     check_output_path(args.out, overwrite=args.overwrite, inputs=[take])
 
 

@@ -21,9 +21,8 @@ from ..default_model import dataset_ranks as default_ranks  # the recipe ranks
 from ..errors import DatasetError, FaceTransferError, ShapeError
 from ..io.atomic import atomic_path, check_output_path
 from ..io.memory import available_memory  # a name of this module: tests replace it
-from ..io.output_names import check_output_suffix
-from .common import (MODEL_ARG_HELP, add_command_group, integer_from, progress_shown,
-                     resolve_model, tqdm_progress)
+from .common import (MODEL_ARG_HELP, add_command_group, check_output_name, integer_from,
+                     progress_shown, resolve_model, tqdm_progress)
 
 log = logging.getLogger(__name__)
 
@@ -160,7 +159,7 @@ def cmd_build(args: argparse.Namespace) -> int:
     from ..datasets import ICT_DATASETS, load_dataset
     from ..model import build_model
 
-    check_output_suffix(args.out, (".npz",), "a model")
+    check_output_name(args.out, (".npz",), "a model")
     check_output_path(args.out, overwrite=args.overwrite, inputs=[args.dataset])
     ranks = parse_ranks(args.ranks)
     if args.identities is not None and args.identities < 2:

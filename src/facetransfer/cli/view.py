@@ -93,10 +93,10 @@ def run(args: argparse.Namespace) -> int:
     from ..errors import FaceTransferError
     from ..export.viewer import write_viewer
     from ..io.atomic import check_output_path
-    from ..io.output_names import check_output_suffix
     from ..take import is_take
+    from .common import check_output_name
 
-    check_output_suffix(args.out, (".html", ".htm"), "the dial editor's page")
+    check_output_name(args.out, (".html", ".htm"), "the dial editor's page")
     check_output_path(args.out, overwrite=args.overwrite, inputs=(args.source, args.model))
     if args.source is None:
         path = _default_model_page(args)

@@ -12,7 +12,8 @@ usd         usd           UsdSkel blend shapes + SkelAnimation (needs ``usd-core
 json        mpjson        per-frame scores in MediaPipe Face Landmarker's layout
 ==========  ============  ===========================================================
 
-What every format shares (the model check, the activations, the head pose) is
+The glb's eyeballs, behind the face's eye holes and turned by its gaze, are
+:mod:`facetransfer.export.gltf_eyes`. What every format shares (the model check, the activations, the head pose) is
 :mod:`facetransfer.export.common`. The browser dial editor is
 :mod:`facetransfer.export.viewer`; a neutral pose for the curves (Live Link Face's calibration)
 is :mod:`facetransfer.export.neutral`.

@@ -9,7 +9,12 @@ normals shades an open jaw as open) named in
 ``mesh.extras.targetNames`` in :data:`facetransfer.arkit.ARKIT_NAMES` order (the convention
 three.js, Blender and Babylon read). One animation ``performance`` has a ``weights`` channel with
 one key per frame (time ``k / fps``, LINEAR) whose values are the track's activations, and the
-head pose as the node's ``rotation`` and ``translation`` channels (same keys). Positions are in
+head pose as the node's ``rotation`` and ``translation`` channels (same keys). Behind the
+face's eye holes, two eyeball nodes (``eyeRight``, ``eyeLeft``: children of ``face``) turned by
+the gaze the eyeLook* curves say, a ``rotation`` channel each (:mod:`.gltf_eyes`; not for a
+model without landmarks), and the mouth's inside, a second primitive of the face mesh with its
+own morph targets (:func:`_mouth_inside`): the lips' gap no longer shows what is behind the
+head. Positions are in
 metres (glTF's unit): model units times ``metres_per_unit`` (0.01 for the ICT-FaceKit's
 centimetres).
 
@@ -43,7 +48,7 @@ from .common import (ExportError, head_quaternions, head_translation, identity_r
                      require_activations, source_name)
 
 __all__ = ["METRES_PER_UNIT", "write_glb", "texture_image", "texture_png",
-           "lift_clip_texture", "check_texture_video", "morph_encoding"]
+           "lift_clip_texture", "check_texture_video", "morph_encoding", "mouth_cone"]
 
 #: Model units to metres (the ICT-FaceKit is in centimetres).
 METRES_PER_UNIT = 0.01
@@ -293,24 +298,116 @@ def _mesh(gltf, blob: _Blob, rig, model, unit: float, material: int) -> None:
     idx = faces.astype(np.uint32).reshape(-1, 1)
     prim = Primitive(attributes=attrs, indices=blob.accessor(idx, "SCALAR", target=_ELEMENTS),
                      material=material, targets=targets)
-    gltf.meshes.append(Mesh(name="face", primitives=[prim], weights=[0.0] * len(rig.deltas),
+    prims = [prim] + _mouth_inside(gltf, blob, model, V, [(d * unit) for d in rig.deltas])
+    gltf.meshes.append(Mesh(name="face", primitives=prims, weights=[0.0] * len(rig.deltas),
                             extras={"targetNames": list(ARKIT_NAMES)}))
 
 
-def _animation(gltf, blob: _Blob, track, activations: np.ndarray, unit: float) -> None:
+def mouth_cone(model, neutral: np.ndarray, deltas: list):
+    """The mouth's inside as the `view` page closes it: a cone from the inner lips' loop
+    (:func:`facetransfer.topology.mesh_topology`) to a point behind its middle by
+    :data:`facetransfer.export.viewer.CAVITY_DEPTH` of its width.
+
+    Returns
+    -------
+    tuple or None
+        ``(points (k+1, 3) float32, fan (k, 3) int64, [deltas (k+1, 3) float32 per shape])``:
+        the loop's points and the point behind, the triangles (facing out of the face), and
+        per shape of ``deltas`` (each ``(n, 3)``, the face's) the loop's own deltas and their
+        mean for the point; None without a mouth gap.
+    """
+    from ..topology import mesh_topology
+    from .viewer import CAVITY_DEPTH
+
+    loop = mesh_topology(model).mouth_loop
+    if loop.size == 0:
+        return None
+    rim = np.asarray(neutral, np.float64)[loop]
+    apex = rim.mean(axis=0) - [0.0, 0.0, CAVITY_DEPTH["mouth"] * np.ptp(rim[:, 0])]
+    k = len(loop)
+    fan = np.stack([np.roll(np.arange(k), -1), np.arange(k), np.full(k, k)], axis=1)
+    moved = [np.concatenate([d[loop], d[loop].mean(axis=0)[None]]).astype(np.float32)
+             for d in deltas]
+    return np.concatenate([rim, apex[None]]).astype(np.float32), fan, moved
+
+
+def _mouth_inside(gltf, blob: _Blob, model, V: np.ndarray, deltas: list) -> list:
+    """The mouth's inside, a second primitive of the face mesh (none without a mouth gap): a
+    cone from the inner lips' loop (:func:`facetransfer.topology.mesh_topology`) to a point
+    behind its middle by :data:`facetransfer.export.viewer.CAVITY_DEPTH` of its width, as the
+    `view` page closes it, in the page's cavity colour, both sides shown. Its morph targets are
+    the loop's own deltas and their mean for the point, so an open jaw opens onto it (before,
+    a player showed what was behind the head there)."""
+    from pygltflib import Attributes, Material, PbrMetallicRoughness, Primitive
+
+    from ..palette import PALETTE
+
+    cone = mouth_cone(model, V, deltas)
+    if cone is None:
+        return []
+    P, fan, cone_deltas = cone
+    srgb = np.asarray(PALETTE["cavity"], np.float64) / 255.0
+    lin = np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
+    gltf.materials.append(Material(name="mouth", doubleSided=True,
+                                   pbrMetallicRoughness=PbrMetallicRoughness(
+                                       baseColorFactor=[float(c) for c in lin] + [1.0],
+                                       metallicFactor=0.0, roughnessFactor=1.0)))
+    targets = [Attributes(POSITION=blob.morph_accessor(D, bounds=True)) for D in cone_deltas]
+    return [Primitive(attributes=Attributes(POSITION=blob.accessor(P, "VEC3", bounds=True)),
+                      indices=blob.accessor(fan.astype(np.uint32).reshape(-1, 1), "SCALAR",
+                                            target=_ELEMENTS),
+                      material=len(gltf.materials) - 1, targets=targets)]
+
+
+def _eyes(gltf, blob: _Blob, model, rig, unit: float) -> list[int]:
+    """The eyeball nodes (:mod:`facetransfer.export.gltf_eyes`), children of node 0, and
+    their mesh and material; their indices, none for a model without landmarks."""
+    from pygltflib import Attributes, Material, Mesh, Node, PbrMetallicRoughness, Primitive
+
+    from .gltf_eyes import EYE_NODES, eye_placement, eyeball_mesh
+
+    placed = eye_placement(model, rig.neutral)
+    if placed is None:
+        return []
+    P, C, T = eyeball_mesh()
+    gltf.materials.append(Material(name="eye", pbrMetallicRoughness=PbrMetallicRoughness(
+        baseColorFactor=[1.0, 1.0, 1.0, 1.0], metallicFactor=0.0, roughnessFactor=0.3)))
+    prim = Primitive(attributes=Attributes(POSITION=blob.accessor(P, "VEC3", bounds=True),
+                                           NORMAL=blob.accessor(P, "VEC3"),
+                                           COLOR_0=blob.accessor(C, "VEC3")),
+                     indices=blob.accessor(T, "SCALAR", target=_ELEMENTS),
+                     material=len(gltf.materials) - 1)
+    gltf.meshes.append(Mesh(name="eyeball", primitives=[prim]))
+    nodes = []
+    for name, centre, radius in zip(EYE_NODES, *placed):
+        gltf.nodes.append(Node(name=name, mesh=len(gltf.meshes) - 1,
+                               translation=[float(x) for x in centre * unit],
+                               scale=[float(radius * unit)] * 3))
+        nodes.append(len(gltf.nodes) - 1)
+    return nodes
+
+
+def _animation(gltf, blob: _Blob, track, activations: np.ndarray, unit: float,
+               eyes: list[int]) -> None:
     from pygltflib import Animation, AnimationChannel, AnimationChannelTarget, AnimationSampler
+
+    from .gltf_eyes import eye_rotations
 
     t = (np.arange(track.n_frames) / track.fps).astype(np.float32).reshape(-1, 1)
     inp = blob.accessor(t, "SCALAR", target=None, bounds=True)
-    outs = {"weights": (activations.reshape(-1, 1).astype(np.float32), "SCALAR"),
-            "rotation": (head_quaternions(track.rotation).astype(np.float32), "VEC4"),
-            "translation": ((head_translation(track) * unit).astype(np.float32), "VEC3")}
+    outs = [(0, "weights", activations.reshape(-1, 1).astype(np.float32), "SCALAR"),
+            (0, "rotation", head_quaternions(track.rotation).astype(np.float32), "VEC4"),
+            (0, "translation", (head_translation(track) * unit).astype(np.float32), "VEC3")]
+    if eyes:
+        q = eye_rotations(activations).astype(np.float32)
+        outs += [(node, "rotation", np.ascontiguousarray(q[:, k]), "VEC4")
+                 for k, node in enumerate(eyes)]
     anim = Animation(name="performance")
-    for i, (path, (a, kind)) in enumerate(outs.items()):
+    for i, (node, path, a, kind) in enumerate(outs):
         anim.samplers.append(AnimationSampler(input=inp, output=blob.accessor(a, kind, target=None),
                                               interpolation="LINEAR"))
         anim.channels.append(AnimationChannel(sampler=i,
-                                              target=AnimationChannelTarget(node=0, path=path)))
+                                              target=AnimationChannelTarget(node=node, path=path)))
     gltf.animations.append(anim)
 
 
@@ -342,9 +439,11 @@ def write_glb(track, model, out: str | os.PathLike, *, overwrite: bool = False, 
     gltf.nodes.append(Node(name="face", mesh=0, rotation=[float(x) for x in q0],
                            translation=[float(x) for x in head_translation(track)[0]
                                         * metres_per_unit]))
+    eyes = _eyes(gltf, blob, model, rig, float(metres_per_unit))
+    gltf.nodes[0].children = eyes
     gltf.scenes.append(Scene(name="facetransfer", nodes=[0]))
     gltf.scene = 0
-    _animation(gltf, blob, track, a, float(metres_per_unit))
+    _animation(gltf, blob, track, a, float(metres_per_unit), eyes)
     pad = (-blob.buf.tell()) % 4
     blob.buf.write(b"\0" * pad)
     data = blob.buf.getvalue()

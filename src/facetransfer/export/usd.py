@@ -4,13 +4,19 @@ Layout (``usd-core``, the optional extra ``facetransfer[usd]``)::
 
     /Face                 SkelRoot (default prim); stage Y up, metersPerUnit 0.01 (model units);
                           extent per time code: the posed face's box (:func:`posed_extents`)
-      /Face/Skel          Skeleton, one joint "head"; skel:animationSource -> Anim
+      /Face/Skel          Skeleton, joints "head", "head/eyeRight", "head/eyeLeft" (the eyes'
+                          centres); skel:animationSource -> Anim
         /Face/Skel/Anim   SkelAnimation: blendShapes (52 ARKit names), blendShapeWeights,
-                          translations / rotations / scales of "head": one time sample per frame
+                          translations / rotations / scales of the joints: one time sample per
+                          frame (the eyes turned by the gaze, :mod:`.gltf_eyes`)
       /Face/Mesh          Mesh (neutral face and its extent, primvars:st), SkelBindingAPI:
                           skel:skeleton, skel:blendShapes + skel:blendShapeTargets, every
                           vertex on "head"
         /Face/Mesh/<name> BlendShape: offsets f_j - f_0 (pointIndices when sparse)
+      /Face/eyeRight      Mesh, the eyeball (displayColor), every vertex on "head/eyeRight"
+      /Face/eyeLeft       likewise on "head/eyeLeft" (no eyes for a model without landmarks)
+      /Face/mouthInside   Mesh, the mouth's inside (:func:`.gltf.mouth_cone`) on "head", with
+                          its own 52 BlendShape prims (the lips' deltas)
 
 Time codes are frame numbers (``timeCodesPerSecond`` = the clip's fps): from 0, or, for a
 track of an image sequence numbered from N (a VFX plate's 1001), from N, so that the
@@ -65,10 +71,11 @@ def _mesh(stage, rig, model, pxr):
     return mesh
 
 
-def _blend_shapes(stage, mesh, rig, pxr):
+def _blend_shapes(stage, mesh, deltas, pxr):
+    """A ``BlendShape`` prim under ``mesh`` per ARKit name, of ``deltas`` (52 of ``(n, 3)``)."""
     Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = pxr
     paths = []
-    for name, d in zip(ARKIT_NAMES, rig.deltas):
+    for name, d in zip(ARKIT_NAMES, deltas):
         bs = UsdSkel.BlendShape.Define(stage, mesh.GetPath().AppendChild(name))
         idx = np.flatnonzero(np.any(d != 0, axis=1)).astype(np.int32)
         if idx.size == 0:  # a shape the model lacks (tongueOut): one zero offset
@@ -136,24 +143,99 @@ def _root_extents(root, track, activations, rig, pxr, first: int) -> None:
         attr.Set(Vt.Vec3fArray.FromNumpy(box[k]), Usd.TimeCode(first + k))
 
 
-def _animation(stage, track, activations, pxr, first: int = 0):
+def _animation(stage, track, activations, pxr, first: int = 0, eyes=None):
+    """The SkelAnimation: the blend shapes' weights, the head joint's pose and, with ``eyes``
+    (:func:`facetransfer.export.gltf_eyes.eye_placement`), each eye joint's turn about its
+    centre (:func:`facetransfer.export.gltf_eyes.eye_rotations`)."""
+    from .gltf_eyes import eye_rotations
+
     Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = pxr
     anim = UsdSkel.Animation.Define(stage, "/Face/Skel/Anim")
-    anim.CreateJointsAttr(["head"])
+    anim.CreateJointsAttr(_joints(eyes))
     anim.CreateBlendShapesAttr(list(ARKIT_NAMES))
     w, tr, ro, sc = (anim.CreateBlendShapeWeightsAttr(), anim.CreateTranslationsAttr(),
                      anim.CreateRotationsAttr(), anim.CreateScalesAttr())
     T = head_translation(track).astype(np.float32)
-    Q = head_quaternions(track.rotation)
-    one = Vt.Vec3hArray([Gf.Vec3h(1, 1, 1)])
+    Q = head_quaternions(track.rotation)[:, None]
+    centres = [] if eyes is None else [Gf.Vec3f(*map(float, c)) for c in eyes[0]]
+    if eyes is not None:
+        Q = np.concatenate([Q, eye_rotations(activations)], axis=1)
+    one = Vt.Vec3hArray([Gf.Vec3h(1, 1, 1)] * Q.shape[1])
     for k in range(track.n_frames):
         t = Usd.TimeCode(first + k)
         w.Set(Vt.FloatArray.FromNumpy(activations[k].astype(np.float32)), t)
-        tr.Set(Vt.Vec3fArray([Gf.Vec3f(*map(float, T[k]))]), t)
-        x, y, z, r = (float(v) for v in Q[k])
-        ro.Set(Vt.QuatfArray([Gf.Quatf(r, x, y, z)]), t)
+        tr.Set(Vt.Vec3fArray([Gf.Vec3f(*map(float, T[k]))] + centres), t)
+        ro.Set(Vt.QuatfArray([Gf.Quatf(float(q[3]), float(q[0]), float(q[1]), float(q[2]))
+                              for q in Q[k]]), t)
         sc.Set(one, t)
     return anim
+
+
+def _mouth_inside(stage, skel, rig, model, pxr) -> None:
+    """The mouth's inside, ``/Face/mouthInside`` (none without a mouth gap): the glb's cone
+    (:func:`facetransfer.export.gltf.mouth_cone`) in the page's cavity colour, on "head", with
+    52 blend shapes of its own (the lips' deltas), so an open jaw opens onto it."""
+    from ..palette import PALETTE
+    from .gltf import mouth_cone
+
+    Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = pxr
+    cone = mouth_cone(model, rig.neutral, list(rig.deltas))
+    if cone is None:
+        return
+    P, fan, deltas = cone
+    mesh = UsdGeom.Mesh.Define(stage, "/Face/mouthInside")
+    points = Vt.Vec3fArray.FromNumpy(P)
+    mesh.CreatePointsAttr(points)
+    mesh.CreateExtentAttr(UsdGeom.Mesh.ComputeExtent(points))
+    mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(fan), 3, np.int32)))
+    mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(fan.ravel().astype(np.int32)))
+    mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
+    mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    mesh.CreateDoubleSidedAttr(True)
+    srgb = np.asarray(PALETTE["cavity"], np.float64) / 255.0
+    lin = np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
+    mesh.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(
+        Vt.Vec3fArray([Gf.Vec3f(*map(float, lin))]))
+    binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
+    binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
+    binding.CreateJointIndicesPrimvar(True, 1).Set(Vt.IntArray([0]))
+    binding.CreateJointWeightsPrimvar(True, 1).Set(Vt.FloatArray([1.0]))
+    binding.CreateGeomBindTransformAttr(Gf.Matrix4d(1))
+    binding.CreateBlendShapesAttr(list(ARKIT_NAMES))
+    binding.CreateBlendShapeTargetsRel().SetTargets(_blend_shapes(stage, mesh, deltas, pxr))
+
+
+def _joints(eyes) -> list[str]:
+    """The skeleton's joints: ``head``, and with eyes its children ``head/eyeRight``,
+    ``head/eyeLeft`` (:data:`facetransfer.export.gltf_eyes.EYE_NODES`)."""
+    from .gltf_eyes import EYE_NODES
+
+    return ["head"] + ([] if eyes is None else [f"head/{n}" for n in EYE_NODES])
+
+
+def _eyeballs(stage, skel, eyes, pxr) -> None:
+    """The eyeball meshes ``/Face/eyeRight``, ``/Face/eyeLeft``, each bound rigidly to its
+    joint (the sphere of :func:`facetransfer.export.gltf_eyes.eyeball_mesh` at the eye's centre
+    and radius, its colours as ``displayColor``)."""
+    from .gltf_eyes import EYE_NODES, eyeball_mesh
+
+    Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = pxr
+    P, C, T = eyeball_mesh()
+    for j, (name, centre, radius) in enumerate(zip(EYE_NODES, *eyes)):
+        mesh = UsdGeom.Mesh.Define(stage, f"/Face/{name}")
+        points = Vt.Vec3fArray.FromNumpy((P * radius + centre).astype(np.float32))
+        mesh.CreatePointsAttr(points)
+        mesh.CreateExtentAttr(UsdGeom.Mesh.ComputeExtent(points))
+        mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(T) // 3, 3, np.int32)))
+        mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(T.ravel().astype(np.int32)))
+        mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
+        mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+        mesh.CreateDisplayColorPrimvar(UsdGeom.Tokens.vertex).Set(Vt.Vec3fArray.FromNumpy(C))
+        binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
+        binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
+        binding.CreateJointIndicesPrimvar(True, 1).Set(Vt.IntArray([j + 1]))
+        binding.CreateJointWeightsPrimvar(True, 1).Set(Vt.FloatArray([1.0]))
+        binding.CreateGeomBindTransformAttr(Gf.Matrix4d(1))
 
 
 def write_usd(track, model, out: str | os.PathLike, *, overwrite: bool = False,
@@ -176,11 +258,16 @@ def write_usd(track, model, out: str | os.PathLike, *, overwrite: bool = False,
     stage.SetEndTimeCode(first_frame + track.n_frames - 1)
     root = UsdSkel.Root.Define(stage, "/Face")
     stage.SetDefaultPrim(root.GetPrim())
+    from .gltf_eyes import eye_placement
+
+    eyes = eye_placement(model, rig.neutral)
     skel = UsdSkel.Skeleton.Define(stage, "/Face/Skel")
-    skel.CreateJointsAttr(["head"])
-    skel.CreateBindTransformsAttr(Vt.Matrix4dArray([Gf.Matrix4d(1)]))
-    skel.CreateRestTransformsAttr(Vt.Matrix4dArray([Gf.Matrix4d(1)]))
-    anim = _animation(stage, track, a, pxr, int(first_frame))
+    skel.CreateJointsAttr(_joints(eyes))
+    at = [Gf.Matrix4d(1)] + ([] if eyes is None else [
+        Gf.Matrix4d(1).SetTranslate(Gf.Vec3d(*map(float, c))) for c in eyes[0]])
+    skel.CreateBindTransformsAttr(Vt.Matrix4dArray(at))   # the eyes' centres, in the head's
+    skel.CreateRestTransformsAttr(Vt.Matrix4dArray(at))   # frame: world = local below head
+    anim = _animation(stage, track, a, pxr, int(first_frame), eyes)
     UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets(
         [anim.GetPath()])
     mesh = _mesh(stage, rig, model, pxr)
@@ -191,7 +278,10 @@ def write_usd(track, model, out: str | os.PathLike, *, overwrite: bool = False,
     binding.CreateJointWeightsPrimvar(True, 1).Set(Vt.FloatArray([1.0]))
     binding.CreateGeomBindTransformAttr(Gf.Matrix4d(1))
     binding.CreateBlendShapesAttr(list(ARKIT_NAMES))
-    binding.CreateBlendShapeTargetsRel().SetTargets(_blend_shapes(stage, mesh, rig, pxr))
+    binding.CreateBlendShapeTargetsRel().SetTargets(_blend_shapes(stage, mesh, rig.deltas, pxr))
+    if eyes is not None:
+        _eyeballs(stage, skel, eyes, pxr)
+    _mouth_inside(stage, skel, rig, model, pxr)
     meta = {"source": source_name(track.source), "generator": "facetransfer"}
     stage.GetRootLayer().customLayerData = meta if timecode is None else \
         {**meta, "timecode": str(timecode)}

@@ -333,9 +333,9 @@ class Track:
 
     def check_model(self, model) -> None:
         """Raise :class:`TrackError` unless ``model`` is the model this track was made with
-        (where that is a default model kept of another version, the refusal names its file:
-        :func:`facetransfer.default_model.kept_model_hint`)."""
-        from ..default_model import kept_model_hint
+        (where that is a default model, the refusal says how to give it: leave out --model for
+        this version's, another version's kept file by name: :mod:`facetransfer.model_hint`)."""
+        from ..model_hint import model_hint
 
         why = None
         if tuple(model.mode_names) != self.mode_names:
@@ -349,7 +349,7 @@ class Track:
                    f"one's {model.content_hash[:12]})")
         if why is not None:
             raise TrackError(f"track {self.label} {why}" + (
-                kept_model_hint(self.model_hash)
+                model_hint(self.model_hash)
                 or " (give the model it was tracked with as --model)"))
 
     def with_source_facts(self, clip=None) -> "Track":

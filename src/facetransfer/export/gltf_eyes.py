@@ -1,0 +1,111 @@
+"""The eyeballs of a ``.glb``: two spheres behind the face's eye holes, turned by its gaze.
+
+The face mesh has holes where the eyes are; a player showed the head's inside through them (the
+`view` page and the puppet draw an eyeball there). Each eye is a node, a child of the ``face``
+node (so it follows the head), placed where the tracker's gaze model places the eyeball
+(:func:`facetransfer.track.gaze.eye_model` of the person's neutral face: behind the eye's
+corners, scaled by its width), sharing one mesh: a sphere of radius 1 scaled by the node to the
+eyeball's radius, painted in vertex colours (``COLOR_0``) as the page paints it
+(:data:`facetransfer.palette.PALETTE`: the pupil and the iris, to the page's angles
+:data:`facetransfer.export.viewer.IRIS_ANGLE` and ``PUPIL_ANGLE``, about the sphere's +z, and
+the sclera). The animation turns each by its ``rotation`` channel, one key a frame: ``Ry(yaw)
+Rx(-pitch)`` of :func:`facetransfer.track.gaze.activation_gaze`'s angles (yaw toward the
+subject's left, +x; pitch up, +y), so +z, the pupil, points along
+:func:`facetransfer.track.gaze.gaze_direction`. The lids (the face's morph targets) close over
+them. Nodes ``eyeRight`` and ``eyeLeft``: the subject's own, as ARKit names them. The USD
+export (:mod:`facetransfer.export.usd`) has the same eyeballs, bound to joints of those names
+below its ``head``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["EYE_NODES", "eye_placement", "eye_rotations", "eyeball_mesh"]
+
+#: The eye nodes' names, in :data:`facetransfer.track.gaze.EYES` order.
+EYE_NODES = ("eyeRight", "eyeLeft")
+#: Rings of the sphere between its poles and vertices about each ring.
+_RINGS, _AROUND = 24, 32
+
+
+def eye_placement(model, neutral: np.ndarray):
+    """The eyeballs of the face ``neutral`` ``(n, 3)`` (model units): ``(centres (2, 3),
+    radii (2,))`` in :data:`EYE_NODES` order, or None for a model without landmarks."""
+    from ..track.gaze import eye_model
+
+    if model.landmarks is None:
+        return None
+    eyes = eye_model(np.asarray(neutral, np.float64)[np.asarray(model.landmarks, np.int64)])
+    return np.asarray(eyes.centre, np.float64), np.asarray(eyes.radius, np.float64)
+
+
+def eye_rotations(activations: np.ndarray) -> np.ndarray:
+    """Each frame's eyeball turns, ``(F, 2, 4)`` quaternions ``(x, y, z, w)`` in
+    :data:`EYE_NODES` order: ``Ry(yaw) Rx(-pitch)`` of the gaze the eyeLook* activations
+    ``(F, 52)`` say (:func:`facetransfer.track.gaze.activation_gaze`)."""
+    from ..track.gaze import activation_gaze
+
+    g = activation_gaze(activations)
+    hy, hp = g[..., 0] / 2.0, -g[..., 1] / 2.0
+    # (0, sin hy, 0, cos hy) * (sin hp, 0, 0, cos hp)
+    q = np.stack([np.cos(hy) * np.sin(hp), np.sin(hy) * np.cos(hp),
+                  -np.sin(hy) * np.sin(hp), np.cos(hy) * np.cos(hp)], -1)
+    return q
+
+
+def _colour(theta: np.ndarray) -> np.ndarray:
+    """Linear RGB of the eyeball at polar angles ``theta`` (radians from +z)."""
+    from ..palette import PALETTE
+    from .viewer import IRIS_ANGLE, PUPIL_ANGLE
+
+    deg = np.degrees(theta)
+    name = np.where(deg < PUPIL_ANGLE, "pupil", np.where(deg < IRIS_ANGLE, "iris", "sclera"))
+    srgb = np.array([PALETTE[str(n)] for n in name], np.float64) / 255.0
+    return np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
+
+
+def eyeball_mesh():
+    """The unit sphere of an eyeball: ``(positions, colours, indices)``, ``(n, 3) float32``,
+    ``(n, 3) float32`` linear RGB, ``(m, 1) uint32`` triangles facing out. The pupil and the
+    iris each have their own vertices at their edges, so their colours stop there."""
+    from .viewer import IRIS_ANGLE, PUPIL_ANGLE
+
+    edges = np.radians([PUPIL_ANGLE, IRIS_ANGLE])
+    bands = [np.linspace(a, b, n + 1) for a, b, n in
+             ((0.0, edges[0], 3), (edges[0], edges[1], 4), (edges[1], np.pi, _RINGS))]
+    phi = np.arange(_AROUND) * (2 * np.pi / _AROUND)
+    pos, col, tris = [], [], []
+    for thetas in bands:
+        rows = []
+        for th in thetas:
+            ring = [0.0] if th in (0.0, np.pi) else phi
+            rows.append(np.arange(len(ring)) + sum(len(p) for p in pos))
+            p = np.stack([np.sin(th) * np.cos(ring), np.sin(th) * np.sin(ring),
+                          np.full(len(ring), np.cos(th))], -1)
+            pos.append(p)
+            col.append(_colour(np.full(len(ring), (thetas[0] + thetas[-1]) / 2)))
+        tris += _strips(rows)
+    P = np.concatenate(pos)
+    T = np.array(tris, np.int64)
+    out = np.einsum("ij,ij->i", np.cross(P[T[:, 1]] - P[T[:, 0]], P[T[:, 2]] - P[T[:, 0]]),
+                    P[T].mean(axis=1)) < 0
+    T[out] = T[out][:, ::-1]
+    return (P.astype(np.float32), np.concatenate(col).astype(np.float32),
+            T.astype(np.uint32).reshape(-1, 1))
+
+
+def _strips(rows: list) -> list:
+    """Triangles joining consecutive rows of vertex indices (a row of one: a pole's fan)."""
+    tris = []
+    for a, b in zip(rows[:-1], rows[1:]):
+        n = max(len(a), len(b))
+        for j in range(n):
+            k = (j + 1) % n
+            if len(a) == 1:
+                tris.append((a[0], b[j], b[k]))
+            elif len(b) == 1:
+                tris.append((a[j], a[k], b[0]))
+            else:
+                tris += [(a[j], a[k], b[k]), (a[j], b[k], b[j])]
+    return tris
