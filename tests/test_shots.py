@@ -213,6 +213,36 @@ def test_a_cut_inside_a_later_chunk_is_named_by_the_clips_frame_numbers(edited, 
         J.track_chunk(job, Chunk(2, 55, 65), out, arkit_model, opt, first)
 
 
+def test_the_optical_flow_trackers_later_chunk_names_the_clips_frame_numbers(
+        edited, arkit_model, tmp_path, caplog):
+    """``batch track --chunk --tracker klt`` of a plate numbered from 1001: a later chunk (rows
+    10-19) that opens on two grey frames says its first face is at the plate's frame 1013, and
+    one of grey frames only names the frames it searched, 1011-1020 (before: 1003 and
+    1001-1010, counted from the chunk's own first frame as if it were the plate's first)."""
+    from facetransfer.batch import jobs as J
+    from facetransfer.batch.chunks import Chunk
+    from facetransfer.batch.manifest import ClipJob
+    from facetransfer.errors import VideoError
+    from facetransfer.track.settings import TrackerSettings
+
+    a, _ = edited
+    grey = np.full((480, 480, 3), 128, np.uint8)
+    (tmp_path / "plate").mkdir()
+    frames = [grey] * 12 + list(a[:8])
+    for k, f in enumerate(frames, start=1001):
+        cv2.imwrite(str(tmp_path / "plate" / f"g.{k}.png"), f[..., ::-1])
+    job = ClipJob("grey", str(tmp_path / "plate" / "g.####.png"))
+    opt = TrackerSettings("klt")
+    with caplog.at_level("INFO", logger="facetransfer.track.tracker"):
+        J.track_chunk(job, Chunk(1, 10, 20), str(tmp_path / "g.npz"), arkit_model, opt)
+    assert "first face found at frame 1013" in caplog.text, caplog.text
+    for k in range(1013, 1021):
+        cv2.imwrite(str(tmp_path / "plate" / f"g.{k}.png"), grey)
+    with pytest.raises(VideoError, match=r"no face found in .*g\.####\.png \(searched frames "
+                                         r"1011-1020\)"):
+        J.track_chunk(job, Chunk(1, 10, 20), str(tmp_path / "g2.npz"), arkit_model, opt)
+
+
 def test_one_persons_shots_share_an_identity_and_a_gap_holds_its_nearest_frames(
         edited, arkit_model, caplog):
     """The same person before and after 12 black frames (a cut to black and back): one

@@ -137,6 +137,33 @@ def test_a_plates_page_takes_and_saves_the_plates_frame_numbers(arkit_model, pag
 
 
 @pytest.mark.slow
+def test_an_older_address_below_a_long_plates_first_number_is_its_row(arkit_model, pages,
+                                                                       tmp_path):
+    """An older page's address kept the row: one below the plate's first number is none of the
+    plate's frames, so it is read as that row even where the plate has more frames than its
+    first number (``frame=500`` of a plate of 1500 frames from 1001; here ``frame=3`` of 8
+    rows numbered from 5: row 3, frame 8; before, read as frame 3, before the plate's first,
+    and the page showed its first frame). A number that is both a row and one of the plate's
+    (``frame=6``) stays the plate's: row 1."""
+    from facetransfer.arkit import weights_to_activations
+    from facetransfer.face_file import face_weights, read_face
+    from facetransfer.io.source_facts import SourceFacts
+
+    _, _, track, a = pages
+    plate = dataclasses.replace(track, source="plate/sh.####.png",
+                                source_facts=SourceFacts(5, None))
+    plate.save(tmp_path / "plate.npz")
+    page = write_viewer(tmp_path / "plate.npz", tmp_path / "plate.html", model=arkit_model)
+    for address, number, row in (("frame=3", 8, 3), ("frame=0", 5, 0), ("frame=6", 6, 1)):
+        assert f'<span id="frameno">{number}</span>' in _dom(page, address), address
+        face = read_face(_saved_face(page, address, tmp_path / "p.json"))
+        assert face.frame == number, address
+        w = face_weights(face, arkit_model)["expression"]
+        np.testing.assert_allclose(weights_to_activations(arkit_model, w[None])[0], a[row],
+                                   atol=2e-6)
+
+
+@pytest.mark.slow
 def test_a_saved_face_is_the_pages_face(arkit_model, pages, tmp_path):
     """The dial editor's Save face holds what the page shows: a track's frame (its activations
     and head rotation to float32's precision) with a dial moved, and a model's sliders; the

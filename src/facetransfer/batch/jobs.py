@@ -100,10 +100,12 @@ def _detector_for(init: str, options):
 
 def _track(video, model, init: str, settings, *, source: str, checkpoint, fixed=None,
            tracker: str | None = None, view=None, face: str | None = None,
-           max_frames: int | None = None):
+           max_frames: int | None = None, first_frame: int | None = None):
     """As ``facetransfer track``: the tracker ``settings`` choose for ``init`` (or ``tracker``);
     ``view``: how frames given as an array are shown (:class:`facetransfer.track.aspect.View`
-    of their video); ``face``: of several people, the one the capture tracker follows."""
+    of their video); ``face``: of several people, the one the capture tracker follows;
+    ``first_frame``: the number of the optical-flow tracker's first frame in what it says (a
+    chunk's: its clip's number; default its ``source``'s first)."""
     from ..track.tracker import track_video
 
     if (tracker or settings.choose(init)) == "capture":
@@ -128,7 +130,8 @@ def _track(video, model, init: str, settings, *, source: str, checkpoint, fixed=
     try:
         return track_video(video, model, init=init, options=settings.klt, source=source,
                            detector=detector, fixed=fixed, checkpoint=checkpoint,
-                           checkpoint_every=SAVE_EVERY, max_frames=max_frames)
+                           checkpoint_every=SAVE_EVERY, max_frames=max_frames,
+                           first_frame=first_frame)
     finally:
         if detector is not None:
             detector.close()
@@ -262,9 +265,12 @@ def track_chunk(job, chunk, out: str, model, options, first=None) -> ChunkResult
     if fixed is not None and tracker == "capture":
         track = _chunk_capture(frames, model, options, job, chunk, fixed["identity"])
     else:
+        from ..io.frame_numbers import first_number
+
         track = _track(frames, model, init, options, source=str(job.video), fixed=fixed,
                        checkpoint=partial_path(out, f".chunk{chunk.index:03d}"),
-                       tracker=tracker, view=View.of(job.video), face=job.face)
+                       tracker=tracker, view=View.of(job.video), face=job.face,
+                       first_frame=first_number(str(job.video)) + chunk.start)
     return ChunkResult(dataclasses.replace(track, fps=fps), time.perf_counter() - t0)
 
 

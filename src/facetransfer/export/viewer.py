@@ -24,8 +24,9 @@ view can be linked, and so the tests can drive it from headless Chromium. ``K`` 
 number (:mod:`facetransfer.io.frame_numbers`: a plate's as its files, ``frame=1004`` of a
 plate from 1001; a video's row from 0), as the page's counter, its own address and its saved
 face's ``frame`` name it; an older page's address kept the row, which is read as such where
-it is none of the plate's numbers and the plate's start past its rows (``frame=3`` of a plate
-of 20 frames from 1001).
+it is below the plate's first number, so none of its frames (``frame=3`` of a plate from 1001;
+``frame=500`` of one of 1500 frames from 1001, before read as its first frame). A number that
+is both a row and one of the plate's (``frame=3`` of a plate from 1) is the plate's.
 """
 
 from __future__ import annotations

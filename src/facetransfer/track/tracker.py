@@ -56,7 +56,7 @@ def track_video(video, model, *, init="auto", options: TrackOptions | None = Non
                 detector=None, max_frames: int | None = None, fixed: dict | None = None,
                 progress: Progress | None = None, source: str | None = None,
                 checkpoint: str | os.PathLike | None = None,
-                checkpoint_every: float = 20.0) -> Track:
+                checkpoint_every: float = 20.0, first_frame: int | None = None) -> Track:
     """Track a face through a video with a multilinear model (Vlasic et al. 2005, §5).
 
     Parameters
@@ -85,6 +85,11 @@ def track_video(video, model, *, init="auto", options: TrackOptions | None = Non
         the track is complete. A file of another run is ignored (and replaced).
     checkpoint_every : float
         Seconds between periodic saves (0 = after every frame).
+    first_frame : int, optional
+        The number a user knows the first of the frames by, in what is said of the first face
+        found or of none (:mod:`facetransfer.io.frame_numbers`): a ``batch track --chunk``
+        chunk's is its clip's first number plus the chunk's start. Default: ``source``'s
+        first number (a plate's, 1001 on; 0 for a video).
 
     Returns
     -------
@@ -101,6 +106,7 @@ def track_video(video, model, *, init="auto", options: TrackOptions | None = Non
     require_landmarks(model)
     frames = frame_source(video, max_frames)
     src = source if source is not None else (frames.path or "")
+    n0 = first_number(src) if first_frame is None else int(first_frame)
     auto = isinstance(init, str) and init == "auto"
     if not auto:  # read and validated once (a file, a dict or an array of points)
         init = _init_array(init, frames.size)
@@ -113,7 +119,7 @@ def track_video(video, model, *, init="auto", options: TrackOptions | None = Non
           _open_checkpoint(checkpoint, frames, model, opt, init, fixed, checkpoint_every))
     try:
         with plain_interrupts():    # an interrupt a compiled kernel wrapped: the interrupt
-            track = _run(frames, model, init, opt, detector, progress, src, fixed, ck)
+            track = _run(frames, model, init, opt, detector, progress, src, fixed, ck, n0)
         if ck is not None:
             ck.remove()
         return track
@@ -237,16 +243,16 @@ def _no_progress(stage: str, done: int, total: int) -> None:
 
 
 def _run(frames: FrameSource, model, init, opt: TrackOptions, detector, progress, src,
-         fixed: dict | None = None, checkpoint=None) -> Track:
+         fixed: dict | None = None, checkpoint=None, n0: int = 0) -> Track:
     """Initialise, snap and run the passes (§5.2, §5.1); resume from ``checkpoint`` if it holds
-    an interrupted run."""
+    an interrupted run. ``n0``: the number of the first frame, as the messages name it."""
     fixed = _check_fixed(model, fixed)
     tr = FaceTracker(model, frames.size, opt, detector=detector, fixed=tuple(fixed))
     t_start = time.perf_counter()
     detect = _Detections(frames, detector)
     resume = checkpoint.load() if checkpoint is not None else None
     if resume is None:
-        start, L0, state0 = _initialise(frames, model, tr, init, detect, src, fixed)
+        start, L0, state0 = _initialise(frames, model, tr, init, detect, src, fixed, n0)
     else:  # an interrupted run of the same video, model and options
         start, L0, state0 = resume.start, np.asarray(resume.L0), resume.state0
         log.info("resuming from %s: pass %d, frame %d", checkpoint.path,
@@ -272,16 +278,17 @@ def _run(frames: FrameSource, model, init, opt: TrackOptions, detector, progress
 
 # ------------------------------------------------------------------------------------ §5.2
 def _initialise(frames: FrameSource, model, tr: FaceTracker, init, detect: _Detections, src,
-                fixed: dict) -> tuple[int, np.ndarray, FrameState]:
+                fixed: dict, n0: int = 0) -> tuple[int, np.ndarray, FrameState]:
     """§5.2 initialisation: the first frame with a face, its feature points (68, 2) and the
-    model fitted to them (pose, identity and expression; ``fixed`` modes held)."""
+    model fitted to them (pose, identity and expression; ``fixed`` modes held); the frames
+    numbered from ``n0`` in what is said."""
     start = 0
     if isinstance(init, str) and init == "auto":
-        start, L0 = _first_face(frames, detect, src)
+        start, L0 = _first_face(frames, detect, src, n0)
     else:
         L0 = _init_array(init, frames.size)
     if start > 0:
-        log.info("first face found at frame %d", first_number(src) + start)
+        log.info("first face found at frame %d", n0 + start)
     start_state = None
     if fixed:
         w = {m: tr.priors[m].mean.copy() for m in model.mode_names}
@@ -294,8 +301,10 @@ def _initialise(frames: FrameSource, model, tr: FaceTracker, init, detect: _Dete
     return start, L0, state0
 
 
-def _first_face(frames: FrameSource, detect: _Detections, src) -> tuple[int, np.ndarray]:
-    """The first frame the detector finds a face in, and its landmarks (68, 2)."""
+def _first_face(frames: FrameSource, detect: _Detections, src, n0: int = 0
+                ) -> tuple[int, np.ndarray]:
+    """The first frame the detector finds a face in, and its landmarks (68, 2); the frames
+    numbered from ``n0`` where none has one."""
     if detect.detector is None:
         raise TrackError("automatic initialisation needs a face detector")
     for i, fr in enumerate(frames.iterate()):
@@ -303,7 +312,7 @@ def _first_face(frames: FrameSource, detect: _Detections, src) -> tuple[int, np.
         if L0 is not None:
             return i, L0
     raise VideoError(f"no face found in {src or 'the video'} (searched frames "
-                     f"{frame_span(first_number(src), frames.n)})")   # a plate's: its numbers
+                     f"{frame_span(n0, frames.n)})")   # a plate's: its numbers
 
 
 def _snap(run: _Run) -> None:
