@@ -72,3 +72,15 @@ def test_an_eye_looking_aside_moves_no_farther_than_the_sclera_it_shows(
     assert along.max() <= 1e-9 and along.min() >= -balls.room[1, 3] - 1e-9
     assert 15.0 < balls.room[1, 3] < 25.0
     assert along.min() < -5.0                                     # it still moves, one way
+
+
+def test_only_a_photo_s_eyeballs_are_bounded_by_what_it_shows():
+    """The bound is a photo's (a picture held over the performance, or one frame): a video's
+    eyeballs are turned as before (its reference frame chosen looking ahead, what its lids
+    hide filled from its clip: eyeball53), to the bit."""
+    from facetransfer.transfer_plan import held_frames
+
+    frame = np.zeros((8, 8, 3), np.uint8)
+    assert eyeballs._held(held_frames(frame, 5)) and eyeballs._held(frame[None])
+    assert not eyeballs._held(np.stack([frame, frame + 1]))
+    assert not eyeballs._held([frame] * 3) and not eyeballs._held(None)

@@ -493,7 +493,7 @@ def eyeballs_of(image: np.ndarray, track, i: int, model, faces: np.ndarray, V: n
 
 #: :func:`eye_room`: an opening of which this share or more is the colour of the skin about it
 #: (nearer than :data:`SKIN_DISTANCE` to its median) does not show an eye (a photo's track put
-#: it on a lid: ``stills/breakingbad.jpg``'s left face, 0.32 of its right eye; the four clips'
+#: it on a lid: ``stills/breakingbad.jpg``'s left face, 0.32 of its right eye; three clips'
 #: reference frames 0.01-0.05, BENCHMARKS.md "Fifty-fifth session (helper photoeye55)").
 SKIN_SHARE = 0.12
 #: ... a CIELAB distance (OpenCV's 8-bit Lab), ...
