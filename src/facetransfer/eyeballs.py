@@ -35,7 +35,8 @@ log = logging.getLogger(__name__)
 __all__ = ["GROW", "LIMIT", "IRIS_CONTRAST", "IRIS_LEVEL", "BAND", "ELONGATION", "SOFT",
            "Eyeballs", "extend_eyeballs", "eyeballs_of", "shift_eyeballs", "track_gaze",
            "gaze_offset", "eye_offsets", "eyeball_frames", "EYEBALL_GAIN", "EYEBALL_VIEW",
-           "EYEBALL_ANGLE", "LIFT_GROW", "LIFT"]
+           "EYEBALL_ANGLE", "LIFT_GROW", "LIFT", "eye_room", "SKIN_SHARE", "SKIN_DISTANCE",
+           "SKIN_RING"]
 
 #: :func:`extend_eyeballs`: the opening grows by this fraction of the eye's width (pixels of the
 #: reference frame) under the lids; its own rim of this many pixels (lashes and the lid margin
@@ -520,7 +521,8 @@ def eye_room(image: np.ndarray, eye: np.ndarray, width: np.ndarray) -> np.ndarra
     lab = cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_RGB2LAB).astype(np.float64)
     for e in (0, 1):
         m = eye == e
-        k = np.bincount(part[m], minlength=2)[1:].argmax() + 1 if m.any() else 0
+        count = np.bincount(part[m], minlength=2)[1:]    # the part of the opening's core
+        k = int(count.argmax()) + 1 if count.max() > 0 else 0
         if k == 0 or not np.isfinite(span[k, 0]):
             continue                     # no iris beside sclera: not an eye to turn
         skin = _skin_like(lab, m, eye, float(width[e]))
