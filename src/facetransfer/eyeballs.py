@@ -36,7 +36,8 @@ __all__ = ["GROW", "RIM_WIDTH", "LIMIT", "IRIS_CONTRAST", "IRIS_LEVEL", "BAND", 
            "SOFT",
            "Eyeballs", "extend_eyeballs", "eyeballs_of", "shift_eyeballs", "track_gaze",
            "gaze_offset", "eye_offsets", "eyeball_frames", "EYEBALL_GAIN", "EYEBALL_VIEW",
-           "EYEBALL_ANGLE", "LIFT_GROW", "LIFT"]
+           "EYEBALL_ANGLE", "LIFT_GROW", "LIFT", "eye_room", "SKIN_SHARE", "SKIN_DISTANCE",
+           "SKIN_RING"]
 
 #: :func:`extend_eyeballs`: the opening grows by this fraction of the eye's width (pixels of the
 #: reference frame) under the lids; its own rim of this many pixels (lashes and the lid margin
@@ -82,6 +83,11 @@ class Eyeballs:
         Per eye, the frame whose eyeball :attr:`image` shows there, lifted into the reference
         frame (:func:`eyeball_frames`; :attr:`angles` is that frame's gaze); None: the
         reference frame's own eyeballs.
+    room : (2, 4) float64 or None
+        A photo's (:func:`eye_room`): per eye, its long axis (x, y) (a unit vector) and the
+        most pixels its iris may move along it forward, then backward: the sclera the photo
+        shows beyond the iris on the side the move uncovers; both 0 for an opening that does
+        not show an eye (the eye keeps the photo's gaze). None: :attr:`limit` alone.
     """
 
     image: np.ndarray
@@ -92,6 +98,7 @@ class Eyeballs:
     lookup: np.ndarray
     iris: np.ndarray
     source: np.ndarray | None = None
+    room: np.ndarray | None = None
 
     @property
     def lifted(self) -> bool:
@@ -106,7 +113,13 @@ class Eyeballs:
         d = _project(self.eyes, angles, self.pose) - self.iris
         n = np.linalg.norm(d, axis=1)
         scale = np.where(n > self.limit, self.limit / np.maximum(n, 1e-12), 1.0)
-        return d * scale[:, None]
+        d = d * scale[:, None]
+        if self.room is not None:        # a photo: no farther than the sclera it shows
+            axis, room = self.room[:, :2], self.room[:, 2:]
+            t = (d * axis).sum(axis=1)
+            d = d + (np.clip(t, -room[:, 1], room[:, 0]) - t)[:, None] * axis
+            d[~(room > 0).any(axis=1)] = 0.0
+        return d
 
 
 def _project(eyes, angles: np.ndarray, pose: tuple) -> np.ndarray:
@@ -482,9 +495,79 @@ def eyeballs_of(image: np.ndarray, track, i: int, model, faces: np.ndarray, V: n
         n0 = track_first_number(track)  # a plate's frames by their numbers
         log.info("eyes: the eyeballs of target frame %d from frames %d (right), %d (left)",
                  n0 + i, *(n0 + k for k in source.tolist()))
+    photo = _held(frames)              # a photo: no other eyeball, nor its own hidden sclera
     return Eyeballs(ext, eyes, angles, pose, LIMIT * width,
                     np.concatenate([np.array([-1], np.int8), np.asarray(fill_eye, np.int8)]),
-                    _project(eyes, angles, pose), source)
+                    _project(eyes, angles, pose), source,
+                    eye_room(image, eye, width) if photo else None)
+
+
+#: :func:`eye_room`: an opening of which this share or more is the colour of the skin about it
+#: (nearer than :data:`SKIN_DISTANCE` to its median) does not show an eye (a photo's track put
+#: it on a lid: ``stills/breakingbad.jpg``'s left face, 0.32 of its right eye; three clips'
+#: reference frames 0.01-0.05, BENCHMARKS.md "Fifty-fifth session (helper photoeye55)").
+SKIN_SHARE = 0.12
+#: ... a CIELAB distance (OpenCV's 8-bit Lab), ...
+SKIN_DISTANCE = 15.0
+#: ... the skin about an opening being its eye's pixels this far outside it (shares of its
+#: eye's width), in no opening.
+SKIN_RING = (0.15, 0.4)
+
+
+def eye_room(image: np.ndarray, eye: np.ndarray, width: np.ndarray) -> np.ndarray:
+    """``(2, 4)`` float64, :attr:`Eyeballs.room`: per eye (right, left) of ``image`` (H, W, 3)
+    uint8, its openings ``eye`` (H, W) int8 (:func:`_eye_map`, widths ``width`` (2,) pixels),
+    the long axis (x, y) of its opening and the sclera the picture shows beyond its iris
+    (:func:`_iris_pixels`; not the skin's colour, :func:`_skin_like`) behind it, then ahead
+    of it along that axis, in pixels: how far a move forward, then backward, may take the
+    iris before it uncovers what the picture never showed. An eye whose opening shows no iris
+    beside sclera, or is :data:`SKIN_SHARE` skin or more, has no room."""
+    import cv2
+
+    out = np.zeros((2, 4))
+    out[:, 0] = 1.0
+    core = cv2.erode((eye >= 0).view(np.uint8), np.ones((3, 3), np.uint8), iterations=RIM)
+    iris, part, axes, span, sclera = _iris_pixels(image, core)
+    lab = cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_RGB2LAB).astype(np.float64)
+    for e in (0, 1):
+        m = eye == e
+        count = np.bincount(part[m], minlength=2)[1:]    # the part of the opening's core
+        k = int(count.argmax()) + 1 if count.max() > 0 else 0
+        if k == 0 or not np.isfinite(span[k, 0]):
+            continue                     # no iris beside sclera: not an eye to turn
+        skin = _skin_like(lab, m, eye, float(width[e]))
+        if skin[m].mean() >= SKIN_SHARE:
+            continue
+        ys, xs = np.nonzero(sclera & (part == k) & ~skin)
+        if xs.size == 0:
+            continue
+        p = xs * axes[k, 0] + ys * axes[k, 1]
+        out[e] = (*axes[k], max(span[k, 0] - p.min(), 0.0), max(p.max() - span[k, 1], 0.0))
+    return out
+
+
+def _skin_like(lab: np.ndarray, m: np.ndarray, eye: np.ndarray, width: float) -> np.ndarray:
+    """``(H, W)`` bool: the pixels of the opening ``m`` (H, W) bool whose colour (``lab``
+    (H, W, 3) float64, OpenCV's 8-bit CIELAB) lies within :data:`SKIN_DISTANCE` of the
+    median of the skin about it (:data:`SKIN_RING` of the eye's ``width`` pixels outside
+    it, in no opening of ``eye`` (H, W) int8)."""
+    import cv2
+
+    d = cv2.distanceTransform((~m).view(np.uint8), cv2.DIST_L2, 5)
+    ring = (d > SKIN_RING[0] * width) & (d < SKIN_RING[1] * width) & (eye < 0)
+    out = np.zeros(m.shape, bool)
+    if ring.any():
+        skin = np.median(lab[ring], axis=0)
+        out[m] = np.linalg.norm(lab[m] - skin, axis=1) < SKIN_DISTANCE
+    return out
+
+
+def _held(frames) -> bool:
+    """Whether ``frames`` are one picture held (a photo as the target,
+    :func:`facetransfer.transfer_plan.held_frames`: a read-only view of its one frame), or one
+    frame."""
+    return isinstance(frames, np.ndarray) and frames.ndim == 4 \
+        and (len(frames) == 1 or frames.strides[0] == 0)
 
 
 def _eye_map(V: np.ndarray, faces: np.ndarray, fill_eye: np.ndarray, cam, shape: tuple,
