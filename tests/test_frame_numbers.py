@@ -18,7 +18,8 @@ import numpy as np
 import pytest
 
 from facetransfer.cli.main import main
-from facetransfer.io.frame_numbers import first_number, frame_index, frame_span, frame_runs
+from facetransfer.io.frame_numbers import (first_number, frame_index, frame_runs, frame_span,
+                                           frames_said)
 from facetransfer.track import Track
 
 #: The plate's frames where the face is hidden (each a flat grey of its own).
@@ -242,3 +243,20 @@ def test_an_older_tracks_first_number_is_the_exports_rule(quick_model, tmp_path)
     # a video's track: 0 by both, nothing read
     video = still_track(quick_model, 3, source=str(tmp_path / "clip.mp4"))
     assert track_first_number(video) == source_first_frame(video) == 0
+
+
+def test_one_lost_frame_is_said_as_one_frame():
+    """walk55b: a 4K transfer said "1 kept original: the target's face is lost in frames 23";
+    one frame is "frame 23", several are "frames ...", in the transfer's and the track's
+    notes alike."""
+    from types import SimpleNamespace
+
+    from facetransfer.cli.export import lost_note
+
+    one, two = np.zeros(24, bool), np.zeros(24, bool)
+    one[23], two[[5, 7]] = True, True
+    assert frames_said(one) == "frame 23" and frames_said(one, 1001) == "frame 1024"
+    assert frames_said(two, 1001) == "frames 1006, 1008"
+    assert frames_said(np.zeros(3, bool)) == ""
+    track = SimpleNamespace(lost=one, source_facts=None, source=None)
+    assert lost_note(track, "held").startswith("the face is lost in frame 23: held")

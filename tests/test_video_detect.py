@@ -111,6 +111,29 @@ def test_finish_split_interrupted_saves_the_first_part():
     assert ck.saved == [first]
 
 
+def test_finish_split_names_another_face_by_the_plates_frame_number(caplog):
+    """The child's part starting on another person is said at the frame's number in the
+    plate (1011 of a plate from 1001), as every other message names a plate's frames, not at
+    its row (10)."""
+    first, other, again = _dets(10), _dets(6, offset=1000.0), _dets(16)
+    with caplog.at_level(logging.INFO, logger=video_detect.__name__):
+        assert finish_split(first, _Child(other), 10, lambda f: again, first_frame=1001) is again
+    assert "another face from frame 1011:" in caplog.text
+    caplog.clear()
+    with caplog.at_level(logging.INFO, logger=video_detect.__name__):
+        finish_split(first, _Child(other), 10, lambda f: again)       # a video: its rows
+    assert "another face from frame 10:" in caplog.text
+
+
+def test_a_plates_detection_numbers_from_its_first_file(tmp_path):
+    for k in (1001, 1002, 1003):
+        (tmp_path / f"sh.{k:04d}.png").write_bytes(b"")
+    assert video_detect._first_number(str(tmp_path / "sh.%04d.png")) == 1001
+    assert video_detect._first_number(tmp_path / "sh.####.png") == 1001
+    assert video_detect._first_number(np.zeros((2, 4, 4, 3), np.uint8)) == 0
+    assert video_detect._first_number("clip.mp4") == 0
+
+
 @pytest.fixture(scope="module")
 def one_process(data_dir):
     video = data_dir / "video" / "driving_d9.mp4"

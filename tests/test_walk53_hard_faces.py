@@ -72,8 +72,8 @@ def test_transfer_says_whose_face_was_lost_and_where(clips, quick_model_path, tm
     cases = ((clips["target_track"], src, "(2 kept original: the expression source's face is "
                                           "lost in frames 2-3)"),
              (tgt, clips["source_track"], "(1 kept original: the target's face is lost in "
-                                          "frames 0)"),
-             (tgt, src, "(3 kept original: the target's face is lost in frames 0; the "
+                                          "frame 0)"),
+             (tgt, src, "(3 kept original: the target's face is lost in frame 0; the "
                         "expression source's face is lost in frames 2-3)"))
     for i, (target_track, source_track, said) in enumerate(cases):
         code, out, err = run(["transfer", "--target", clips["target"], "--target-track",

@@ -299,9 +299,9 @@ def lost_note(track, held: str) -> str:
     if not track.lost.any():
         return ""
     from ..export.usd import source_first_frame
-    from ..file_facts import lost_runs
+    from ..io.frame_numbers import frames_said
 
-    return f"the face is lost in frames {lost_runs(track.lost, source_first_frame(track))}: {held}"
+    return f"the face is lost in {frames_said(track.lost, source_first_frame(track))}: {held}"
 
 
 def _rows_said(args, track) -> str:

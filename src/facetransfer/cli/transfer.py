@@ -111,13 +111,13 @@ def _whose_lost(plan, first: int = 0, align: str | None = None) -> str:
     source, named its frames counted from 0."""
     import numpy as np
 
-    from ..io.frame_numbers import frame_runs
+    from ..io.frame_numbers import frames_said
 
     new = np.asarray(plan.new_track.lost, bool)
     own = np.zeros_like(new)
     target = np.asarray(plan.target_track.lost, bool)[:len(new)]
     own[:len(target)] = target
-    said = [f"the target's face is lost in frames {frame_runs(own, first)}"] if own.any() else []
+    said = [f"the target's face is lost in {frames_said(own, first)}"] if own.any() else []
     others = new & ~own
     if others.any():
         said += _sources_lost(plan, others, first, align)
@@ -132,11 +132,11 @@ def _sources_lost(plan, kept, first: int, align: str | None) -> list[str]:
     numbered otherwise)."""
     import numpy as np
 
-    from ..io.frame_numbers import frame_runs, track_first_number
+    from ..io.frame_numbers import frame_runs, frames_said, track_first_number
     from ..transfer import source_frames_read, time_map
 
     if plan.performance:       # on the target's timeline, numbered as the result
-        return [f"the performance's face is lost in frames {frame_runs(kept, first)}"]
+        return [f"the performance's face is lost in {frames_said(kept, first)}"]
     said = []
     for role, tr in plan.source_tracks.items():
         if role not in _ROLES or tr is None or not np.asarray(tr.lost).any():
@@ -150,9 +150,10 @@ def _sources_lost(plan, kept, first: int, align: str | None) -> list[str]:
         read = np.zeros(tr.n_frames, bool)
         read[np.r_[i0[mine[:len(i0)]], i1[mine[:len(i0)]]]] = True
         here, own = frame_runs(mine, first), frame_runs(read & tr.lost, track_first_number(tr))
-        said.append(f"{_ROLES[role]}'s face is lost in frames {here}" if own == here else
-                    f"{_ROLES[role]}'s face is lost in its frames {own}, the result's {here}")
-    return said or [f"a source's face is lost in frames {frame_runs(kept, first)}"]
+        said.append(f"{_ROLES[role]}'s face is lost in {frames_said(mine, first)}"
+                    if own == here else f"{_ROLES[role]}'s face is lost in its "
+                    f"{frames_said(read & tr.lost, track_first_number(tr))}, the result's {here}")
+    return said or [f"a source's face is lost in {frames_said(kept, first)}"]
 
 
 def _result_first(out, target, first: int | None = None) -> int:

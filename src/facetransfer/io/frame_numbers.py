@@ -18,7 +18,8 @@ import numpy as np
 
 from ..errors import FaceTransferError
 
-__all__ = ["first_number", "track_first_number", "frame_runs", "frame_span", "frame_index"]
+__all__ = ["first_number", "track_first_number", "frame_runs", "frames_said", "frame_span",
+           "frame_index"]
 
 
 def first_number(clip: str | os.PathLike | None) -> int:
@@ -66,6 +67,16 @@ def frame_runs(mask, first: int = 0, limit: int = 4) -> str:
     ends = np.r_[idx[:-1][cut], idx[-1]]
     runs = [f"{a}" if a == b else f"{a}-{b}" for a, b in zip(starts, ends)]
     return ", ".join(runs[:limit]) + (f", ... ({len(runs)} runs)" if len(runs) > limit else "")
+
+
+def frames_said(mask, first: int = 0, limit: int = 4) -> str:
+    """``"frame 1005"`` where ``mask`` (F,) marks one frame, ``"frames 1003-1007, 1012"``
+    where it marks more (:func:`frame_runs`, numbered from ``first``); "" where none. A
+    message naming one lost frame said "frames 23"."""
+    runs = frame_runs(mask, first, limit)
+    if not runs:
+        return ""
+    return f"{'frame' if int(np.count_nonzero(mask)) == 1 else 'frames'} {runs}"
 
 
 def frame_span(first: int, n: int) -> str:

@@ -272,7 +272,8 @@ class SplitDetection:
 
 def finish_split(first: ClipDetections, child: SplitDetection, start: int,
                  redetect: Callable[[ClipDetections], ClipDetections],
-                 poll: Callable[[int], None] | None = None, checkpoint=None) -> ClipDetections:
+                 poll: Callable[[int], None] | None = None, checkpoint=None,
+                 first_frame: int = 0) -> ClipDetections:
     """The whole clip's detections from this process's part and the child's.
 
     Parameters
@@ -287,6 +288,10 @@ def finish_split(first: ClipDetections, child: SplitDetection, start: int,
     poll : callable(frames done by the child), optional
     checkpoint : object with ``save(ClipDetections)``, optional
         Given ``first`` when interrupted while waiting for the child.
+    first_frame : int
+        The number of the clip's first frame (a plate's 1001:
+        :func:`facetransfer.io.frame_numbers.first_number`), what the info line names the
+        child's first frame by.
     """
     if first.n_frames < start:                      # the clip ended in this process's part
         child.cancel()
@@ -303,7 +308,7 @@ def finish_split(first: ClipDetections, child: SplitDetection, start: int,
         return first
     if other_face(first, rest):
         log.info("the second detection process followed another face from frame %d: "
-                 "detecting its part again here", start)
+                 "detecting its part again here", start + int(first_frame))
         return redetect(first)
     if poll is not None:
         poll(rest.n_frames)                         # the bar ends at the clip's last frame
@@ -377,7 +382,8 @@ def detect_video(video, *, detector=None, max_frames: int | None = None,
                           resume=resume, checkpoint=checkpoint, pixel_aspect=view.aspect,
                           every=every, eyes=eyes)
         if child is not None:
-            det = finish_split(det, child, m, redetect, report_child, checkpoint)
+            det = finish_split(det, child, m, redetect, report_child, checkpoint,
+                               first_frame=_first_number(video))
     except BaseException as exc:
         if child is not None:
             child.cancel()
@@ -400,6 +406,16 @@ def _shown_subject(subject, view: View, resume: ClipDetections | None):
     x = float(to_shown_x(subject[0], view.aspect))
     followed = resume is not None and bool(np.isfinite(resume.points).any())
     return FacePoint(x, subject[1], "" if followed else getattr(subject, "said", ""))
+
+
+def _first_number(video) -> int:
+    """The number of ``video``'s first frame: a plate's own (1001), 0 for a video file or
+    an array of frames."""
+    if not isinstance(video, (str, os.PathLike)):
+        return 0
+    from ..io.frame_numbers import first_number
+
+    return first_number(video)
 
 
 def _open(video, max_frames, source):
