@@ -390,6 +390,20 @@ def test_capture_on_a_real_clip_follows_mediapipe(arkit_model, data_dir):
     assert tr.blendshapes.min() >= 0 and tr.blendshapes.max() <= 1
 
 
+def test_parted_lips_in_speech_are_not_read_as_a_funnel(arkit_model, data_dir):
+    """funnel55c: on ``WDA_KatieHill_000`` (speech; Face Landmarker's funnel 0.00-0.057, std
+    0.0106) our first pass's false funnels (std 3 times the detector's) made the score line's
+    slope 2.95, and the second pass read the detector's 0.04-0.06 as 0.1-0.13 (this model: max
+    0.130, 8 frames above 0.08). The bounded line (``scores.MAX_SLOPE``) keeps every frame
+    below 0.08 (measured 0.048)."""
+    from facetransfer.track.capture import capture_video
+
+    tr = capture_video(data_dir / "video" / "WDA_KatieHill_000.mp4", arkit_model)
+    funnel = tr.blendshapes[:, ARKIT_NAMES.index("mouthFunnel")]
+    assert tr.n_frames == 200 and not tr.lost.any()
+    assert funnel.max() < 0.08
+
+
 def test_umeyama_recovers_a_similarity():
     from facetransfer.render import rotation_from_euler as rot
     from facetransfer.track.dense import umeyama

@@ -553,7 +553,7 @@ def test_fit_interrupted_in_the_second_pass_continues_exactly(clip, arkit_model,
     ck = DetectionCheckpoint(path, "k")
     assert ck.load().complete
     fit = ck.saved_fit(fit_key(arkit_model.content_hash, capture.CaptureOptions(), None))
-    assert fit.lines is not None and fit.lines.shape == (2, 52)
+    assert fit.lines is not None and fit.lines.shape == (3, 52)   # offsets, slopes, weights
     lost = int(ref.info["start_frame"] <= NO_FACE < fit.forward_next)
     assert fit.valid.sum() == stop - lost
     calls = _count_fits(monkeypatch)

@@ -12,6 +12,7 @@ from facetransfer.track.scores import (MIN_SCORE_STD, SCORED_SHAPES, fit_score_l
                                        score_targets)
 
 JAW, BLINK = ARKIT_NAMES.index("jawOpen"), ARKIT_NAMES.index("eyeBlinkLeft")
+FUN = ARKIT_NAMES.index("mouthFunnel")
 
 
 def _clip(F=40, seed=0):
@@ -26,6 +27,7 @@ def test_a_linear_score_maps_exactly_onto_the_activation():
     A, S = _clip()
     A[:, JAW] = 0.1 + 0.6 * S[:, JAW]                # our pass: the score, on another scale
     A[:, BLINK] = 0.9 - 0.3 * S[:, BLINK]            # a negative relation: |slope| is kept
+    A[:, FUN] *= 0.5                                 # within the funnel's bound (MAX_SLOPE)
     line = fit_score_lines(A, S)
     assert line.slope[JAW] == pytest.approx(0.6) and line.offset[JAW] == pytest.approx(0.1)
     np.testing.assert_allclose(score_targets(line, S)[:, JAW], A[:, JAW], atol=1e-12)
@@ -87,3 +89,25 @@ def test_track_command_reads_the_scores_unless_told_not_to():
     assert track_settings(p.parse_args([])).capture.scores == CaptureOptions().scores > 0
     assert track_settings(p.parse_args(["--no-scores"])).capture.scores == 0.0
     assert track_settings(p.parse_args(["--no-scores", "--smooth", "1"])).capture.smooth == 1.0
+
+
+def test_a_funnel_line_steeper_than_the_bound_is_flattened_through_the_medians():
+    """funnel55c: where our first pass's funnel moves 3 times as much as the detector's (on
+    real clips: our false funnels of parted lips), the line's slope is bounded to MAX_SLOPE,
+    passes through both medians (the rest levels) and its term is weighed by (3 / 1)², so one
+    unit of the score weighs as before; the jaw's steep line is kept."""
+    from facetransfer.track.scores import MAX_SLOPE
+
+    assert MAX_SLOPE == {"mouthFunnel": 1.0}
+    A, S = _clip(F=200)
+    S[:, FUN] = 0.01 + 0.02 * np.sin(np.arange(200) / 7.0)
+    A[:, FUN] = 3.0 * S[:, FUN]                       # a steep line: slope 3
+    A[:, JAW] = 0.1 + 3.0 * S[:, JAW]
+    line = fit_score_lines(A, S)
+    assert line.slope[FUN] == pytest.approx(1.0) and line.weight[FUN] == pytest.approx(9.0)
+    assert line.offset[FUN] == pytest.approx(np.median(A[:, FUN]) - np.median(S[:, FUN]))
+    assert line.slope[JAW] == pytest.approx(3.0) and line.weight[JAW] == pytest.approx(1.0)
+    t = score_targets(line, S)
+    assert t[:, FUN].std() == pytest.approx(S[:, FUN].std(), rel=1e-9)   # the score's scale
+    assert np.nanmedian(t[:, FUN]) == pytest.approx(np.median(A[:, FUN]), abs=1e-9)
+    assert np.isnan(line.weight[ARKIT_NAMES.index("browInnerUp")])       # not a scored shape

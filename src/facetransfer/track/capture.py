@@ -595,7 +595,8 @@ def _track_passes(run: "_FitRun", det: ClipDetections, weights: PointWeights,
             return
         run.begin_refine(_score_lines(run, det))
     anchors = score_targets(run.lines, det.scores)[:, run.shape.used]
-    _track_both(run, det, replace(weights, anchors=anchors), opt,
+    _track_both(run, det, replace(weights, anchors=anchors,
+                                  anchor_weights=run.lines.weight[run.shape.used]), opt,
                 lambda stage, done, total: prog("refine", done, total), maybe_save)
 
 
@@ -651,7 +652,8 @@ class _FitRun:
                          sd.residual), valid, R, sc, t, x, r, self.forward_next,
                         self.backward_next,
                         None if self.lines is None else np.stack([self.lines.offset,
-                                                                  self.lines.slope]))
+                                                                  self.lines.slope,
+                                                                  self.lines.weight]))
 
     @classmethod
     def restore(cls, fit: SavedFit, model, sampler: Sampler, opt: CaptureOptions) -> "_FitRun":
@@ -662,7 +664,7 @@ class _FitRun:
         states = [FrameState(Pose(fit.rotation[i], float(fit.scale[i]), fit.translation[i]),
                          fit.x[i], float(fit.residual[i])) if fit.valid[i] else None
                   for i in range(len(fit.valid))]
-        lines = None if fit.lines is None else ScoreLine(fit.lines[0], fit.lines[1])
+        lines = None if fit.lines is None else ScoreLine(*fit.lines)
         return cls(shape, fit.frames, fit.start, FrameState(Pose(R, sc, t), x, r), states,
                    fit.forward_next, fit.backward_next, lines)
 

@@ -67,7 +67,7 @@ def gaze_fixed(shape: Shape, pose: Pose, x: np.ndarray, gaze: tuple,
 
 def fit_frame(shape: Shape, targets: Targets, iod: float, pose: Pose | None, x: np.ndarray,
                prev: np.ndarray | None, iterations: int, gaze: tuple | None = None,
-               anchor: np.ndarray | None = None) -> FrameState:
+               anchor: tuple | None = None) -> FrameState:
     """Alternate pose (Gauss-Newton, Eq. (7)) and expression (bounded or prior-weighted LS,
     Eq. (9)) for one frame (``targets``: the detections first); with ``gaze`` (:func:`iris_of`;
     ARKit models) the eyeLook* activations follow the iris at each pose."""
@@ -102,6 +102,7 @@ class PointWeights:
     iris: np.ndarray | None = None     # (F, 2, 2) iris centres the gaze follows (NaN: free)
     closed: np.ndarray | None = None   # (F, 2) eyes with closed lids (vertical gaze free)
     anchors: np.ndarray | None = None  # (F, K) mapped detector scores (NaN: none)
+    anchor_weights: np.ndarray | None = None  # (K,) their terms' factors (ScoreLine.weight)
 
     def flow_nominal(self, flow: float) -> np.ndarray:
         """Summed weights (P,) of the detection and flow terms with every point known (the
@@ -110,9 +111,13 @@ class PointWeights:
         wf[68:] = 0.0
         return self.w + wf
 
-    def anchor(self, i: int) -> np.ndarray | None:
-        """Frame ``i``'s mapped scores (K,) for the fit, or None."""
-        return None if self.anchors is None else self.anchors[i]
+    def anchor(self, i: int) -> tuple | None:
+        """Frame ``i``'s mapped scores (K,) and their terms' factors (K,) for the fit, or
+        None."""
+        if self.anchors is None:
+            return None
+        w = np.ones(self.anchors.shape[1]) if self.anchor_weights is None else self.anchor_weights
+        return self.anchors[i], w
 
 
 def detection_targets(det: ClipDetections, i: int, pw: PointWeights) -> tuple[np.ndarray, np.ndarray]:

@@ -221,11 +221,12 @@ class Shape:
 
     def solve(self, pose: Pose, targets: Targets, iod: float, x: np.ndarray,
               prev: np.ndarray | None, fixed: np.ndarray | None = None,
-              anchor: np.ndarray | None = None) -> np.ndarray:
+              anchor: tuple | None = None) -> np.ndarray:
         """The per-frame parameters best explaining ``targets`` at ``pose`` (ARKit: the
-        activations where ``fixed`` (K,) is finite held at its values, and pulled with weight
-        ``opt.scores`` toward ``anchor`` (K,) where it is finite: the mapped detector scores of
-        :mod:`facetransfer.track.scores`; with ``opt.lip_contact``, where the box solution
+        activations where ``fixed`` (K,) is finite held at its values, and, with ``anchor`` =
+        ``(a, f)`` (K,) each, pulled with weight ``opt.scores · f`` toward ``a`` where it is
+        finite: the mapped detector scores of :mod:`facetransfer.track.scores` and their lines'
+        weights; with ``opt.lip_contact``, where the box solution
         crosses the lips, solved again with the inner-lip gaps held:
         :mod:`facetransfer.track.lip_contact`)."""
         lam_p, lam_t = self.opt.expression_prior, (self.opt.temporal if prev is not None else 0.0)
@@ -235,10 +236,11 @@ class Shape:
             ridge = lam_p * self.ridge + lam_t + 1e-9
             rhs = lam_t * prev if prev is not None else np.zeros(self.size)
             if anchor is not None:
-                ok = np.isfinite(anchor)
-                lam_a = np.where(ok, self.opt.scores, 0.0)                   # (K,)
+                a, f = anchor
+                ok = np.isfinite(a) & np.isfinite(f)
+                lam_a = np.where(ok, self.opt.scores * f, 0.0)               # (K,)
                 ridge = ridge + lam_a
-                rhs = rhs + lam_a * np.where(ok, anchor, 0.0)
+                rhs = rhs + lam_a * np.where(ok, a, 0.0)
             lo, hi = self._zeros, self._ones
             if fixed is not None:
                 ok = np.isfinite(fixed)

@@ -30,8 +30,9 @@ __all__ = ["FIT_VERSION", "fit_key", "SavedFit", "pack_fit", "unpack_fit"]
 
 #: bumped when the saved fit changes layout or meaning (older fits are then ignored)
 #: 2: the second pass (score lines); 3: the inner lips weighed up (INNER_LIPS); 4: the lips'
-#: contact held (lip_contact); 5: that contact solved exactly (contact_qp by its dual)
-FIT_VERSION = 5
+#: contact held (lip_contact); 5: that contact solved exactly (contact_qp by its dual); 6:
+#: the score lines' weights (a bounded slope)
+FIT_VERSION = 6
 #: prefix of the fit's entries in the progress file
 PREFIX = "fit_"
 
@@ -77,8 +78,9 @@ class SavedFit:
         Their states (zeros where not ``valid``).
     forward_next, backward_next : int
         The next frame of the forward run (``F``: done) and of the backward run (-1: done).
-    lines : (2, 52) float64 or None
-        In the second pass: the score lines' offsets and slopes (NaN: a shape not read);
+    lines : (3, 52) float64 or None
+        In the second pass: the score lines' offsets, slopes and weights (NaN: a shape not
+        read);
         None in the first.
     """
 
@@ -130,7 +132,7 @@ def unpack_fit(entries: dict) -> tuple[str, SavedFit] | None:
     shapes = {"rotation": (F, 3, 3), "scale": (F,), "translation": (F, 2), "residual": (F,)}
     if any(d[k].shape != v for k, v in shapes.items()) or d["x"].shape[0] != F \
             or d["offset"].ndim != 2 or not 0 <= int(d["start"]) < F \
-            or (lines.size and lines.shape != (2, 52)):
+            or (lines.size and lines.shape != (3, 52)):
         raise ValueError("inconsistent fit arrays")
     fit = SavedFit(
         identity=d["identity"] if bool(d["has_identity"]) else None, offset=d["offset"],

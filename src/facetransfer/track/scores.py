@@ -12,7 +12,11 @@ per-clip line fitted to its own first pass:
 2. Per scored shape, a line maps the score onto that pass's activation: the reduced major axis
    (the line through both means whose slope is the ratio of the standard deviations), so the
    mapped score keeps the amplitude our geometry measured and takes its timing from the
-   detector.
+   detector. The funnel's slope is bounded (:data:`MAX_SLOPE`): where the detector's funnel
+   hardly moves, our first pass's larger one is not its amplitude but our own false funnel;
+   the bounded line passes through both medians (the rest levels, which those few false
+   funnels do not raise as they raise our mean) and keeps the score's weight in the score's
+   own units (:class:`ScoreLine`).
 3. The clip is tracked again with a ridge pulling each frame's activation toward its mapped
    score (:func:`score_targets`), beside the points, flow and temporal terms.
 
@@ -31,7 +35,7 @@ import numpy as np
 from ..arkit import ARKIT_NAMES
 from ..errors import ShapeError
 
-__all__ = ["SCORED_SHAPES", "ScoreLine", "fit_score_lines", "score_targets"]
+__all__ = ["MAX_SLOPE", "SCORED_SHAPES", "ScoreLine", "fit_score_lines", "score_targets"]
 
 #: the shapes whose score the fit reads (``bench_capture.py``, synthetic clips with truth). Left
 #: out: the smiles (reading them raised the 51-shape activation error from 0.083 / 0.104 / 0.127
@@ -45,6 +49,15 @@ SCORED_SHAPES: tuple[str, ...] = (
 #: below this standard deviation over the clip a score says nothing (the shape never moves)
 MIN_SCORE_STD = 0.01
 
+#: the largest slope a shape's line may take. On the clips where Face Landmarker reads real
+#: funnels (``bench_capture.py``'s synthetic ``turned`` and ``eyes_closed`` against the truth;
+#: ``driving_d6``'s "O") our first pass's funnel is 0.49-0.78 of its own, so a reduced major
+#: axis steeper than 1 does not measure a compressed score: it scales the detector's small
+#: funnels by our first pass's false ones, the lips parted in speech (``WDA_KatieHill_000``
+#: 2.95: its 0.043-0.057 read as 0.115). Such a line is flattened to the bound through both
+#: medians (its term weighed up, :class:`ScoreLine`).
+MAX_SLOPE: dict[str, float] = {"mouthFunnel": 1.0}
+
 
 @dataclass(frozen=True)
 class ScoreLine:
@@ -54,10 +67,17 @@ class ScoreLine:
     ----------
     offset, slope : (52,) float64
         In :data:`~facetransfer.arkit.ARKIT_NAMES` order; NaN for a shape not read.
+    weight : (52,) float64
+        The factor on the second pass's score term (``CaptureOptions.scores``): 1, or where the
+        reduced major axis's slope ``b`` was bounded to ``c`` (:data:`MAX_SLOPE`), ``(b / c)²``:
+        the term ``w (x - offset - c s)²`` is ``w c² ((x - offset) / c - s)²`` in the score's
+        units, so the bound changes the score's scale, not how much one unit of it is trusted.
+        NaN for a shape not read.
     """
 
     offset: np.ndarray
     slope: np.ndarray
+    weight: np.ndarray
 
     def used(self) -> np.ndarray:
         """(52,) bool: the shapes with a line."""
@@ -81,8 +101,9 @@ def fit_score_lines(activations: np.ndarray, scores: np.ndarray,
     -------
     ScoreLine
         ``slope = std(a) / std(s)``, ``offset = mean(a) - slope mean(s)`` over the frames where
-        both are known; no line where fewer than 8 such frames exist or the score's std is
-        below :data:`MIN_SCORE_STD`.
+        both are known; where that slope exceeds :data:`MAX_SLOPE`, the bound, ``offset =
+        median(a) - slope median(s)`` and a ``weight`` above 1. No line where fewer than 8 such
+        frames exist or the score's std is below :data:`MIN_SCORE_STD`.
     """
     A, S = np.asarray(activations, np.float64), np.asarray(scores, np.float64)
     if A.shape != S.shape or A.ndim != 2 or A.shape[1] != len(ARKIT_NAMES):
@@ -90,6 +111,7 @@ def fit_score_lines(activations: np.ndarray, scores: np.ndarray,
                          f"{A.shape} and {S.shape}")
     offset = np.full(len(ARKIT_NAMES), np.nan)
     slope = np.full(len(ARKIT_NAMES), np.nan)
+    weight = np.full(len(ARKIT_NAMES), np.nan)
     for n in names:
         k = ARKIT_NAMES.index(n)
         ok = np.isfinite(A[:, k]) & np.isfinite(S[:, k])
@@ -98,9 +120,12 @@ def fit_score_lines(activations: np.ndarray, scores: np.ndarray,
         a, s = A[ok, k], S[ok, k]
         if s.std() < MIN_SCORE_STD:
             continue
-        slope[k] = a.std() / s.std()
-        offset[k] = a.mean() - slope[k] * s.mean()
-    return ScoreLine(offset, slope)
+        b = a.std() / s.std()
+        slope[k] = min(b, MAX_SLOPE.get(n, np.inf))
+        weight[k] = (b / slope[k]) ** 2
+        offset[k] = (a.mean() - b * s.mean() if slope[k] == b
+                     else np.median(a) - slope[k] * np.median(s))
+    return ScoreLine(offset, slope, weight)
 
 
 def score_targets(line: ScoreLine, scores: np.ndarray) -> np.ndarray:
