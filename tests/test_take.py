@@ -847,3 +847,43 @@ def test_a_take_onto_a_plate_from_1001_starts_at_its_first_frame_and_says_the_ra
     np.testing.assert_allclose(moved.blendshapes, onto.blendshapes, atol=1e-9)
     assert ("ends at the target's frame 1024 (its rows 30 a second, the target's frames 24): "
             "its last row is held on frames 1025-1030") in caplog.text, caplog.text
+
+
+def test_a_takes_glb_and_usd_eyes_look_where_the_take_recorded(arkit_model, tmp_path, capsys):
+    """``export take.csv --out face.glb`` (and ``.usda``) of a take whose eye rotation columns
+    say 20° to the subject's left and 0.1 rad down while its eyeLook* curves are all 0: the
+    eyeballs' pupils (+z) point there, as the puppet and the ``view`` page show the take
+    (:func:`facetransfer.puppet_face.track_gaze`). Before the review, the glb and the USD
+    turned the eyes by the eyeLook* curves alone: the exported eyes looked straight ahead
+    while the page's looked aside."""
+    import pygltflib
+    from scipy.spatial.transform import Rotation
+    from test_export import _read_accessor
+    from test_puppet_eyes import RECORDED, _take_with_eye_columns
+
+    from facetransfer.cli.main import main
+    from facetransfer.track.gaze import gaze_direction
+
+    take = _take_with_eye_columns(arkit_model, tmp_path / "t.csv", **RECORDED)
+    model = tmp_path / "arkit.npz"
+    arkit_model.save(model)
+    want = gaze_direction([0.35, -0.1])       # + toward the subject's left, pitch up
+    for out in ("face.glb", "face.usda"):
+        code = main([str(x) for x in ["export", take, "--model", model,
+                                      "--out", tmp_path / out]])
+        assert code == 0, capsys.readouterr().err
+    g = pygltflib.GLTF2().load(str(tmp_path / "face.glb"))
+    chans = {c.target.node: g.animations[0].samplers[c.sampler].output
+             for c in g.animations[0].channels if c.target.path == "rotation"}
+    for node in (1, 2):                       # eyeRight, eyeLeft
+        q = _read_accessor(g, chans[node]).astype(np.float64)
+        np.testing.assert_allclose(Rotation.from_quat(q).apply([0.0, 0.0, 1.0]),
+                                   np.tile(want, (len(q), 1)), atol=1e-6)
+    pxr = pytest.importorskip("pxr", reason="usd-core is not installed (extra [usd])")
+    stage = pxr.Usd.Stage.Open(str(tmp_path / "face.usda"))
+    rot = stage.GetPrimAtPath("/Face/Skel/Anim").GetAttribute("rotations")
+    for t in rot.GetTimeSamples():
+        for q in list(rot.Get(t))[1:]:        # the eye joints'
+            xyzw = [*q.GetImaginary(), q.GetReal()]
+            np.testing.assert_allclose(Rotation.from_quat(xyzw).apply([0.0, 0.0, 1.0]), want,
+                                       atol=1e-6)

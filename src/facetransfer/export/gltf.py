@@ -391,7 +391,7 @@ def _animation(gltf, blob: _Blob, track, activations: np.ndarray, unit: float,
                eyes: list[int]) -> None:
     from pygltflib import Animation, AnimationChannel, AnimationChannelTarget, AnimationSampler
 
-    from .gltf_eyes import eye_rotations
+    from .gltf_eyes import eye_rotations, track_eye_gaze
 
     t = (np.arange(track.n_frames) / track.fps).astype(np.float32).reshape(-1, 1)
     inp = blob.accessor(t, "SCALAR", target=None, bounds=True)
@@ -399,7 +399,7 @@ def _animation(gltf, blob: _Blob, track, activations: np.ndarray, unit: float,
             (0, "rotation", head_quaternions(track.rotation).astype(np.float32), "VEC4"),
             (0, "translation", (head_translation(track) * unit).astype(np.float32), "VEC3")]
     if eyes:
-        q = eye_rotations(activations).astype(np.float32)
+        q = eye_rotations(activations, track_eye_gaze(track, activations)).astype(np.float32)
         outs += [(node, "rotation", np.ascontiguousarray(q[:, k]), "VEC4")
                  for k, node in enumerate(eyes)]
     anim = Animation(name="performance")

@@ -11,7 +11,9 @@ eyeball's radius, painted in vertex colours (``COLOR_0``) as the page paints it
 the sclera). The animation turns each by its ``rotation`` channel, one key a frame: ``Ry(yaw)
 Rx(-pitch)`` of :func:`facetransfer.track.gaze.activation_gaze`'s angles (yaw toward the
 subject's left, +x; pitch up, +y), so +z, the pupil, points along
-:func:`facetransfer.track.gaze.gaze_direction`. The lids (the face's morph targets) close over
+:func:`facetransfer.track.gaze.gaze_direction`; a Live Link Face take's by its recorded eye
+angles where it has them, as the puppet and the ``view`` page turn them
+(:func:`track_eye_gaze`). The lids (the face's morph targets) close over
 them. Nodes ``eyeRight`` and ``eyeLeft``: the subject's own, as ARKit names them. The USD
 export (:mod:`facetransfer.export.usd`) has the same eyeballs, bound to joints of those names
 below its ``head``.
@@ -21,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["EYE_NODES", "eye_placement", "eye_rotations", "eyeball_mesh"]
+__all__ = ["EYE_NODES", "eye_placement", "eye_rotations", "eyeball_mesh", "track_eye_gaze"]
 
 #: The eye nodes' names, in :data:`facetransfer.track.gaze.EYES` order.
 EYE_NODES = ("eyeRight", "eyeLeft")
@@ -40,18 +42,33 @@ def eye_placement(model, neutral: np.ndarray):
     return np.asarray(eyes.centre, np.float64), np.asarray(eyes.radius, np.float64)
 
 
-def eye_rotations(activations: np.ndarray) -> np.ndarray:
+def eye_rotations(activations: np.ndarray, gaze: np.ndarray | None = None) -> np.ndarray:
     """Each frame's eyeball turns, ``(F, 2, 4)`` quaternions ``(x, y, z, w)`` in
-    :data:`EYE_NODES` order: ``Ry(yaw) Rx(-pitch)`` of the gaze the eyeLook* activations
+    :data:`EYE_NODES` order: ``Ry(yaw) Rx(-pitch)`` of ``gaze`` (``(F, 2, 2)``, radians,
+    :func:`track_eye_gaze`), or where it is None of the gaze the eyeLook* activations
     ``(F, 52)`` say (:func:`facetransfer.track.gaze.activation_gaze`)."""
     from ..track.gaze import activation_gaze
 
-    g = activation_gaze(activations)
+    g = activation_gaze(activations) if gaze is None else np.asarray(gaze, np.float64)
     hy, hp = g[..., 0] / 2.0, -g[..., 1] / 2.0
     # (0, sin hy, 0, cos hy) * (sin hp, 0, 0, cos hp)
     q = np.stack([np.cos(hy) * np.sin(hp), np.sin(hy) * np.cos(hp),
                   -np.sin(hy) * np.sin(hp), np.cos(hy) * np.cos(hp)], -1)
     return q
+
+
+def track_eye_gaze(track, activations: np.ndarray) -> np.ndarray:
+    """Where the exported eyes look, ``(F, 2, 2)`` ``[frame, eye (right, left), (yaw,
+    pitch)]``: as the puppet and the ``view`` page turn them
+    (:func:`facetransfer.puppet_face.track_gaze`: a Live Link Face take's recorded eye angles
+    where it has them), else the gaze of ``activations`` (``(F, 52)``, the exported curves).
+    Before, a take's glb and USD turned the eyes by its eyeLook* curves alone, the page and
+    the puppet by its recorded angles: one take, two gazes."""
+    from ..puppet_face import track_gaze
+    from ..track.gaze import activation_gaze
+
+    recorded = track_gaze(track)
+    return activation_gaze(activations) if recorded is None else recorded
 
 
 def _colour(theta: np.ndarray) -> np.ndarray:

@@ -147,7 +147,7 @@ def _animation(stage, track, activations, pxr, first: int = 0, eyes=None):
     """The SkelAnimation: the blend shapes' weights, the head joint's pose and, with ``eyes``
     (:func:`facetransfer.export.gltf_eyes.eye_placement`), each eye joint's turn about its
     centre (:func:`facetransfer.export.gltf_eyes.eye_rotations`)."""
-    from .gltf_eyes import eye_rotations
+    from .gltf_eyes import eye_rotations, track_eye_gaze
 
     Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = pxr
     anim = UsdSkel.Animation.Define(stage, "/Face/Skel/Anim")
@@ -159,7 +159,8 @@ def _animation(stage, track, activations, pxr, first: int = 0, eyes=None):
     Q = head_quaternions(track.rotation)[:, None]
     centres = [] if eyes is None else [Gf.Vec3f(*map(float, c)) for c in eyes[0]]
     if eyes is not None:
-        Q = np.concatenate([Q, eye_rotations(activations)], axis=1)
+        Q = np.concatenate([Q, eye_rotations(activations, track_eye_gaze(track, activations))],
+                           axis=1)
     one = Vt.Vec3hArray([Gf.Vec3h(1, 1, 1)] * Q.shape[1])
     for k in range(track.n_frames):
         t = Usd.TimeCode(first + k)
