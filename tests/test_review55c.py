@@ -3,11 +3,14 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import cv2
 import numpy as np
 import pytest
 
-from facetransfer import eyeballs
+from facetransfer import eyeballs, face_scale
+from facetransfer.topology import mesh_topology
 
 SKIN = (150, 105, 85)
 
@@ -52,3 +55,60 @@ def test_a_larger_photos_eye_room_is_measured_inside_the_rim_the_fill_redoes():
     # a data-folder eye (50 px wide, the rim 1 px) is measured as before
     small, eye_s, width_s = _photo_eyes(50, lashes=1)
     assert (eyeballs.eye_room(small, eye_s, width_s)[:, 2:] > 0).all()
+
+
+def _record_scales(monkeypatch):
+    """The ``scale`` of each ``rewrite_frame_part`` call of the clip renderer, in order."""
+    from facetransfer import rewrite_clip
+
+    seen = []
+    part = rewrite_clip.rewrite_frame_part
+
+    def recorded(*args, **kw):
+        seen.append(kw["scale"])
+        return part(*args, **kw)
+
+    monkeypatch.setattr(rewrite_clip, "rewrite_frame_part", recorded)
+    return seen
+
+
+def test_a_run_resumed_mid_shot_takes_the_whole_shots_factor_and_a_cut_its_own(
+        arkit_model, monkeypatch):
+    """A render continued from a frame in the middle of a shot (``transfer`` resumed through
+    the render cache: ``RenderRun.start``) rewrites its frames with the factor of the whole
+    shot (:func:`facetransfer.face_scale.shot_scale`), as the uninterrupted run does: its
+    frames equal that run's to the bit. Not the factor of the frames left (here 1.249 against
+    the shot's 1.275: the blend's erosion 2 px, not 3). After a cut the next shot takes its own
+    factor (1.6), not the clip's."""
+    from facetransfer.rewrite_clip import RenderRun, rewrite_frames
+    from facetransfer.rewrite_options import RewriteOptions
+    from conftest import mean_person_track
+
+    model = arkit_model
+    topo = mesh_topology(model)
+    V = model.synthesize(model.default_weights())
+    c = [V[np.asarray(loop)].mean(axis=0) for loop in topo.eye_loops]
+    d = float(np.linalg.norm(c[0] - c[1]))
+    monkeypatch.setattr(face_scale, "FACE_SPAN", 50.0)      # the threshold at a small face
+    factors = np.array([1.30, 1.30, 1.249, 1.249, 1.6, 1.6, 1.6, 1.6])
+    track = mean_person_track(model, np.zeros((8, 52), np.float32), size=256, scale=10.0)
+    track = dataclasses.replace(track, scale=factors * 50.0 / d, shot_starts=(4,))
+    rng = np.random.default_rng(5)
+    frames = [np.clip(np.asarray(SKIN) + rng.normal(0, 12, (256, 256, 3)), 0, 255)
+              .astype(np.uint8) for _ in range(8)]
+    seen = _record_scales(monkeypatch)
+    whole = [r.image for r in rewrite_frames(frames, track, track, model,
+                                             options=RewriteOptions(),
+                                             run=RenderRun(workers=1))]
+    per_frame = len(seen) // 8
+    shot = face_scale.shot_scale(V, track, topo.eye_loops, range(4))
+    assert shot == pytest.approx(1.2745, abs=5e-3)
+    assert seen == pytest.approx([shot] * (4 * per_frame) + [1.6] * (4 * per_frame), abs=5e-3)
+    seen.clear()
+    resumed = [r.image for r in rewrite_frames(frames, track, track, model,
+                                               options=RewriteOptions(),
+                                               run=RenderRun(workers=1, start=2))]
+    assert seen == pytest.approx([shot] * (2 * per_frame) + [1.6] * (4 * per_frame), abs=5e-3)
+    assert len(resumed) == 6
+    for k, image in enumerate(resumed, 2):
+        assert np.array_equal(image, whole[k]), k
