@@ -478,7 +478,7 @@ def eyeballs_of(image: np.ndarray, track, i: int, model, faces: np.ndarray, V: n
     eyes = eye_model(V[lm])
     eye, width = _eye_map(V, faces, fill_eye, track.camera(i), image.shape[:2], lm)
     grow = max(int(round(GROW * width.max())), 2)
-    rim = max(RIM, int(round(width.max() / RIM_WIDTH)))  # the rim grows with the eye
+    rim = _rim(width)                  # the rim grows with the eye
     ext = extend_eyeballs(image, eye >= 0, grow=grow, rim=rim)
     pose = (np.asarray(track.rotation[i], np.float64), float(track.scale[i]),
             np.asarray(track.translation[i], np.float64), float(track.pixel_aspect))
@@ -521,12 +521,21 @@ def eye_room(image: np.ndarray, eye: np.ndarray, width: np.ndarray) -> np.ndarra
     (:func:`_iris_pixels`; not the skin's colour, :func:`_skin_like`) behind it, then ahead
     of it along that axis, in pixels: how far a move forward, then backward, may take the
     iris before it uncovers what the picture never showed. An eye whose opening shows no iris
-    beside sclera, or is :data:`SKIN_SHARE` skin or more, has no room."""
+    beside sclera, or is :data:`SKIN_SHARE` skin or more, has no room.
+
+    The iris and the sclera are found inside each opening's rim grown with its eye, as
+    :func:`eyeballs_of` grows the rim it redoes (:func:`_rim` of the eye's own width: a turned
+    head's far eye keeps the 1 px of an eye its size): before (review55c), inside :data:`RIM`
+    alone, a larger eye's lashes left there joined an iris touching the lids into one dark
+    part spanning the eye, and the eye had no room."""
     import cv2
 
     out = np.zeros((2, 4))
     out[:, 0] = 1.0
-    core = cv2.erode((eye >= 0).view(np.uint8), np.ones((3, 3), np.uint8), iterations=RIM)
+    core = np.zeros(eye.shape, np.uint8)
+    for e in (0, 1):
+        core |= cv2.erode((eye == e).view(np.uint8), np.ones((3, 3), np.uint8),
+                          iterations=_rim(width[e]))
     iris, part, axes, span, sclera = _iris_pixels(image, core)
     lab = cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_RGB2LAB).astype(np.float64)
     for e in (0, 1):
@@ -560,6 +569,13 @@ def _skin_like(lab: np.ndarray, m: np.ndarray, eye: np.ndarray, width: float) ->
         skin = np.median(lab[ring], axis=0)
         out[m] = np.linalg.norm(lab[m] - skin, axis=1) < SKIN_DISTANCE
     return out
+
+
+def _rim(width: np.ndarray) -> int:
+    """The openings' rim in pixels for eyes ``width`` pixels wide (one, or each eye's): what
+    :func:`eyeballs_of` redoes (of the wider eye) and :func:`eye_room` measures inside (of
+    each eye): :data:`RIM_WIDTH` of the width, rounded, at least :data:`RIM`."""
+    return max(RIM, int(round(float(np.max(width)) / RIM_WIDTH)))
 
 
 def _held(frames) -> bool:
