@@ -71,7 +71,7 @@ def test_an_eye_looking_aside_moves_no_farther_than_the_sclera_it_shows(
     along = d[:, 1] @ axis
     assert along.max() <= 1e-9 and along.min() >= -balls.room[1, 3] - 1e-9
     assert 15.0 < balls.room[1, 3] < 25.0
-    assert along.min() < -5.0                                     # it still moves, one way
+    assert np.abs(d).max() == 0.0      # review55c: its fellow held, it is held too
 
 
 def test_only_a_photo_s_eyeballs_are_bounded_by_what_it_shows():
@@ -84,3 +84,22 @@ def test_only_a_photo_s_eyeballs_are_bounded_by_what_it_shows():
     assert eyeballs._held(held_frames(frame, 5)) and eyeballs._held(frame[None])
     assert not eyeballs._held(np.stack([frame, frame + 1]))
     assert not eyeballs._held([frame] * 3) and not eyeballs._held(None)
+
+
+def test_a_photos_eyes_that_both_show_room_move_each_within_its_own(monkeypatch):
+    """Where both openings show an eye, each iris moves along its eye no farther than the
+    sclera its photo shows on the side the move uncovers, and across it as the gaze says; where
+    one shows none, neither moves (review55c: one eye turned beside one held)."""
+    from facetransfer import eyeballs
+
+    monkeypatch.setattr(eyeballs, "_project", lambda eyes, angles, pose: np.asarray(angles))
+    room = np.array([[1.0, 0.0, 3.0, 2.0], [1.0, 0.0, 4.0, 1.0]])   # axis x; ahead, behind
+    balls = eyeballs.Eyeballs(image=None, eyes=None, angles=None, pose=None,
+                              limit=np.array([10.0, 10.0]), lookup=None,
+                              iris=np.zeros((2, 2)), room=room)
+    d = balls.shift(np.array([[8.0, 1.5], [-6.0, -2.0]]))
+    np.testing.assert_allclose(d, [[3.0, 1.5], [-1.0, -2.0]])
+    held = eyeballs.Eyeballs(image=None, eyes=None, angles=None, pose=None,
+                             limit=np.array([10.0, 10.0]), lookup=None, iris=np.zeros((2, 2)),
+                             room=np.array([[1.0, 0.0, 3.0, 2.0], [1.0, 0.0, 0.0, 0.0]]))
+    assert np.abs(held.shift(np.array([[2.0, 1.0], [1.0, 1.0]]))).max() == 0.0

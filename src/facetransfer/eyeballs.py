@@ -87,7 +87,8 @@ class Eyeballs:
         A photo's (:func:`eye_room`): per eye, its long axis (x, y) (a unit vector) and the
         most pixels its iris may move along it forward, then backward: the sclera the photo
         shows beyond the iris on the side the move uncovers; both 0 for an opening that does
-        not show an eye (the eye keeps the photo's gaze). None: :attr:`limit` alone.
+        not show an eye (that eye keeps the photo's gaze, and so does its fellow: one eye
+        turned beside one held looked aside of each other). None: :attr:`limit` alone.
     """
 
     image: np.ndarray
@@ -118,7 +119,8 @@ class Eyeballs:
             axis, room = self.room[:, :2], self.room[:, 2:]
             t = (d * axis).sum(axis=1)
             d = d + (np.clip(t, -room[:, 1], room[:, 0]) - t)[:, None] * axis
-            d[~(room > 0).any(axis=1)] = 0.0
+            if not (room > 0).any(axis=1).all():   # one eye held holds its fellow (review55c:
+                d[:] = 0.0                          # one eye turned, one not, diverged)
         return d
 
 
