@@ -232,3 +232,18 @@ def still_track(model, n: int, *, source: str = ""):
                  landmarks2d=np.zeros((n, 68, 2)), confidence=np.ones(n),
                  lost=np.zeros(n, bool), model_hash=model.content_hash,
                  mode_names=model.mode_names, source=source)
+
+
+def record_scales(monkeypatch):
+    """The ``scale`` of each ``rewrite_frame_part`` call of the clip renderer, in order."""
+    from facetransfer import rewrite_clip
+
+    seen = []
+    part = rewrite_clip.rewrite_frame_part
+
+    def recorded(*args, **kw):
+        seen.append(kw["scale"])
+        return part(*args, **kw)
+
+    monkeypatch.setattr(rewrite_clip, "rewrite_frame_part", recorded)
+    return seen

@@ -17,7 +17,7 @@ from facetransfer.rewrite_options import BlendOptions
 from facetransfer.texture.face import FaceTexture, frame_uvs
 from facetransfer.topology import close_mouth, mesh_topology
 
-from conftest import jaw_open_track
+from conftest import jaw_open_track, record_scales
 
 SKIN = (120, 90, 72)
 LIT = tuple(int(1.6 * c) for c in SKIN)  # the closed frame's skin: beyond the gain's clip
@@ -211,7 +211,6 @@ def test_a_clips_frames_take_one_factor_for_their_shot(arkit_model, monkeypatch)
     each its own: a face whose measure moves about a whole-pixel setting's step from frame
     to frame (the blend's erosion: 2 px at a factor of 1.249, 3 at 1.251) had its outline
     flicker (a 1280x1280 clip's frame 19: 1,097 pixels by more than 8 levels, up to 111)."""
-    from facetransfer import rewrite_clip
     from facetransfer.rewrite_clip import RenderRun, rewrite_frames
     from facetransfer.rewrite_options import RewriteOptions
     from conftest import mean_person_track
@@ -229,14 +228,7 @@ def test_a_clips_frames_take_one_factor_for_their_shot(arkit_model, monkeypatch)
     assert [face_scale.face_scale(s) for s in spans] == pytest.approx(factors)
     assert face_scale.shot_scale(V, track, topo.eye_loops, range(5)) == pytest.approx(1.251)
     assert face_scale.shot_scale(V, track, topo.eye_loops, []) == 1.0
-    seen = []
-    part = rewrite_clip.rewrite_frame_part
-
-    def recorded(*args, **kw):
-        seen.append(kw["scale"])
-        return part(*args, **kw)
-
-    monkeypatch.setattr(rewrite_clip, "rewrite_frame_part", recorded)
+    seen = record_scales(monkeypatch)
     frames = [np.full((256, 256, 3), SKIN, np.uint8)] * 5
     out = list(rewrite_frames(frames, track, track, model, options=RewriteOptions(blend="none"),
                               run=RenderRun(workers=1)))

@@ -12,6 +12,8 @@ import pytest
 from facetransfer import eyeballs, face_scale
 from facetransfer.topology import mesh_topology
 
+from conftest import record_scales
+
 SKIN = (150, 105, 85)
 
 
@@ -57,21 +59,6 @@ def test_a_larger_photos_eye_room_is_measured_inside_the_rim_the_fill_redoes():
     assert (eyeballs.eye_room(small, eye_s, width_s)[:, 2:] > 0).all()
 
 
-def _record_scales(monkeypatch):
-    """The ``scale`` of each ``rewrite_frame_part`` call of the clip renderer, in order."""
-    from facetransfer import rewrite_clip
-
-    seen = []
-    part = rewrite_clip.rewrite_frame_part
-
-    def recorded(*args, **kw):
-        seen.append(kw["scale"])
-        return part(*args, **kw)
-
-    monkeypatch.setattr(rewrite_clip, "rewrite_frame_part", recorded)
-    return seen
-
-
 def test_a_run_resumed_mid_shot_takes_the_whole_shots_factor_and_a_cut_its_own(
         arkit_model, monkeypatch):
     """A render continued from a frame in the middle of a shot (``transfer`` resumed through
@@ -96,7 +83,7 @@ def test_a_run_resumed_mid_shot_takes_the_whole_shots_factor_and_a_cut_its_own(
     rng = np.random.default_rng(5)
     frames = [np.clip(np.asarray(SKIN) + rng.normal(0, 12, (256, 256, 3)), 0, 255)
               .astype(np.uint8) for _ in range(8)]
-    seen = _record_scales(monkeypatch)
+    seen = record_scales(monkeypatch)
     whole = [r.image for r in rewrite_frames(frames, track, track, model,
                                              options=RewriteOptions(),
                                              run=RenderRun(workers=1))]
