@@ -146,3 +146,101 @@ def test_the_flows_box_lies_in_the_frame_and_holds_the_points_grown(W, H, n, x, 
     assert (cols.stop - cols.start) * (rows.stop - rows.start) <= detect.FLOW_CROP_SHARE * H * W
     assert cols.start <= max(pts[:, 0].min() - m, 0) and rows.start <= max(pts[:, 1].min() - m, 0)
     assert cols.stop >= min(pts[:, 0].max() + m, W) and rows.stop >= min(pts[:, 1].max() + m, H)
+
+
+def _katie(data_dir, stop: int):
+    """``WDA_KatieHill_000``'s first ``stop`` frames (RGB, 512 px) and their iBUG-68 points
+    from the data folder's MediaPipe reference."""
+    from facetransfer.io.video_read import iter_frames
+    from facetransfer.track.landmarks import mediapipe_to_ibug
+
+    clip = data_dir / "video" / "WDA_KatieHill_000.mp4"
+    frames = list(iter_frames(clip, stop=stop))
+    ref = np.load(clip.with_name("WDA_KatieHill_000.mediapipe478.npz"))["landmarks"][:stop]
+    return frames, np.stack([mediapipe_to_ibug(q[:, :2]) for q in ref])
+
+
+def _grey4(rgb):
+    """A 512 px frame's grey image four times larger (2048 px: a face of 4K footage)."""
+    return cv2.resize(cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY), None, fx=4, fy=4,
+                      interpolation=cv2.INTER_CUBIC)
+
+
+def test_the_flow_keeps_a_face_four_times_larger_as_it_keeps_the_face(data_dir):
+    """The flow's pixel settings grow with the face (:func:`detect.flow_scale`): a real clip's
+    40 frames four times larger lose about the points the clip loses at its own size, and move
+    the kept ones four times as far. In fixed pixels they lost 22-94 % of the points a frame
+    (the clip itself 0-68 %), a frame carried by the flow losing its face past 80 %."""
+    frames, P = _katie(data_dir, 40)
+    G = [cv2.cvtColor(f, cv2.COLOR_RGB2GRAY) for f in frames]
+    lost1, lost4, err = [], [], []
+    for i in range(39):
+        f1 = point_flow(G[i], G[i + 1], P[i])
+        f4 = point_flow(_grey4(frames[i]), _grey4(frames[i + 1]), 4 * P[i])
+        assert detect.flow_scale(P[i]) == 1.0 and detect.flow_scale(4 * P[i]) > 2.5
+        ok1, ok4 = np.isfinite(f1).all(1), np.isfinite(f4).all(1)
+        lost1.append(1 - ok1.mean())
+        lost4.append(1 - ok4.mean())
+        both = ok1 & ok4
+        eye = np.linalg.norm(P[i, 36] - P[i, 45])
+        err.append(np.median(np.linalg.norm(f4[both] / 4 - f1[both], axis=1)) / eye)
+    lost1, lost4 = np.array(lost1), np.array(lost4)
+    assert lost4.mean() <= 0.15 and (lost4 <= lost1 + 0.25).all()
+    assert np.median(err) < 0.005                   # a 512 px face's eyes: 0.8 px of ~160
+
+
+def _carried(frames, P, k: int) -> np.ndarray:
+    """``detect_clip(every=2)`` of two frames ``k`` times larger, the first shown to a detector
+    that gives ``k`` times its reference points ``P`` (2, 68, 2): the second frame's points,
+    carried by the flow (no shown frame after it), divided by ``k``."""
+
+    class Detector:
+        """The reference points of the frames it is shown; it can skip one."""
+
+        def __init__(self):
+            self.seen = 0
+
+        def detect(self, fr):
+            self.seen += 1
+            return k * P[self.seen - 1]
+
+        def skip(self, fr):
+            self.seen += 1
+
+    big = [cv2.resize(f, None, fx=k, fy=k, interpolation=cv2.INTER_CUBIC) for f in frames]
+    det = detect.detect_clip(big, Detector(), every=2)
+    assert det.shown.tolist() == [True, False]
+    return det.points[1] / k
+
+
+def test_a_4k_faces_last_frame_carried_by_the_flow_keeps_its_face(data_dir):
+    """``detect_clip``'s ``every`` = 2 (the transfer's ``--speed fast``) on two frames (a fast
+    turn) of a face four times larger: the last frame, never shown to the detector, is carried
+    by the flow and keeps its face, as near the detector's points as at 512 px, and far nearer
+    than the frame before (it was lost: 87 % of the points' flow failed at the fixed
+    settings)."""
+    frames, P = _katie(data_dir, 35)
+    eye = np.linalg.norm(P[34, 36] - P[34, 45])
+    err = {k: np.linalg.norm(_carried(frames[33:], P[33:], k) - P[34], axis=1).mean() / eye
+           for k in (1, 4)}                                # 0.027 and 0.028 eye distances
+    held = np.linalg.norm(P[33] - P[34], axis=1).mean() / eye          # 0.075
+    assert np.isfinite(err[4]) and err[4] <= 1.2 * err[1] and err[4] < 0.5 * held
+
+
+def test_the_flows_scale_is_one_on_the_data_clips_and_the_rewrites_rule_beyond(data_dir):
+    """The data folder's clips (every frame's reference points) keep the flow's pixel settings
+    as they are, so their tracks are as before to the bit; beyond, the factor is the rewrite's
+    (:func:`facetransfer.face_scale.face_scale`) of the points' eye centres' distance."""
+    from facetransfer.face_scale import FACE_SPAN, face_scale
+    from facetransfer.track.landmarks import mediapipe_to_ibug
+
+    assert detect.FLOW_SPAN == FACE_SPAN
+    for name in ("WDA_KatieHill_000", "driving_d6", "driving_d9", "face_2"):
+        ref = np.load(data_dir / "video" / f"{name}.mediapipe478.npz")["landmarks"]
+        scales = [detect.flow_scale(mediapipe_to_ibug(q[:, :2])) for q in ref]
+        assert max(scales) == 1.0, name
+    pts = np.zeros((68, 2))
+    pts[36:42], pts[42:48] = (100.0, 300.0), (100.0 + 2.5 * FACE_SPAN, 300.0)
+    assert detect.flow_scale(pts) == pytest.approx(face_scale(2.5 * FACE_SPAN)) == 2.5
+    pts[36:42] = np.nan                                     # no eye: the settings as they are
+    assert detect.flow_scale(pts) == 1.0 and detect.flow_scale(pts[:30]) == 1.0

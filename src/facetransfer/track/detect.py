@@ -25,8 +25,8 @@ from .mp_result import array_reader
 from .shots import CUT_FLOW_FAILED, CUT_LEVELS
 from .skip_rule import eye_scores_moving, eyes_changed
 
-__all__ = ["FLOW_SLACK", "FLOW_CROP_SHARE", "THUMB_BLOCKS", "ClipDetections", "VideoLandmarker",
-           "detect_clip", "point_flow", "picture_change",
+__all__ = ["FLOW_SLACK", "FLOW_CROP_SHARE", "FLOW_SPAN", "THUMB_BLOCKS", "ClipDetections",
+           "VideoLandmarker", "detect_clip", "flow_scale", "point_flow", "picture_change",
            "preload_mediapipe"]
 
 
@@ -210,24 +210,66 @@ FLOW_SLACK, FLOW_CROP_SHARE = 6, 1.0
 _LK_FLAGS = cv2.OPTFLOW_LK_GET_MIN_EIGENVALS
 
 
+#: :func:`point_flow`'s settings (the window, the pyramid's levels, the forward-backward
+#: tolerance) are in the pixels of a face whose eyes' centres (the means of iBUG points 36-41
+#: and 42-47) lie at most ``FLOW_SPAN`` pixels apart: the data folder's clips, 106-142 px by
+#: their detections. A larger face is carried on its box shrunk by ``span / FLOW_SPAN``
+#: (:func:`flow_scale`), so that in the frame's pixels each setting grows with the face. The
+#: rule of the rewrite's settings (:data:`facetransfer.face_scale.FACE_SPAN`), measured on the
+#: detected points, as the flow has no model. Fixed, a 4K face (eyes about 480 px apart) lost
+#: 25-84 % of its points a frame and a frame carried by the flow lost its face
+#: (BENCHMARKS.md, "Fifty-fifth session (helper fast4k55)").
+FLOW_SPAN = 145.0
+
+
+def flow_scale(pts: np.ndarray) -> float:
+    """The factor of :func:`point_flow`'s pixel settings for the iBUG-68 points ``pts``
+    (68, 2): 1 up to :data:`FLOW_SPAN` pixels between the eyes' centres, ``span / FLOW_SPAN``
+    beyond; 1 for other points or where an eye has no finite point."""
+    P = np.asarray(pts, np.float64)
+    if P.shape != (68, 2):
+        return 1.0
+    eyes = [e[np.isfinite(e).all(axis=1)] for e in (P[36:42], P[42:48])]
+    if not all(len(e) for e in eyes):
+        return 1.0
+    span = float(np.hypot(*(eyes[0].mean(axis=0) - eyes[1].mean(axis=0))))
+    return max(1.0, span / FLOW_SPAN)
+
+
 def point_flow(prev_gray: np.ndarray, gray: np.ndarray, pts: np.ndarray, *,
-               window: int = 21, levels: int = 2, max_fb: float = 1.0) -> np.ndarray:
+               window: int = 21, levels: int = 2, max_fb: float = 1.0,
+               scale: float | None = None) -> np.ndarray:
     """Lucas-Kanade displacement of points from one frame into the next, (n, 2), NaN on failure.
 
     A point fails when OpenCV loses it or when tracking it back lands more than ``max_fb``
     pixels from where it started (forward-backward check). The flow is computed on the
     points' box (:data:`FLOW_SLACK`, :data:`FLOW_CROP_SHARE`), its error left as OpenCV's
-    cheaper one (:data:`_LK_FLAGS`).
+    cheaper one (:data:`_LK_FLAGS`). ``window``, ``levels`` and ``max_fb`` are pixels of a face
+    of at most :data:`FLOW_SPAN`; ``scale`` (default: :func:`flow_scale` of ``pts``) above 1
+    carries the points on the box shrunk by it (:func:`_shrunk_flow`).
     """
     ok = np.all(np.isfinite(pts), axis=1)
     out = np.full(pts.shape, np.nan)
     if not ok.any():
+        return out
+    s = flow_scale(pts) if scale is None else max(1.0, float(scale))
+    if s > 1.0:
+        out[ok] = _shrunk_flow(prev_gray, gray, pts[ok], s, window, levels, max_fb)
         return out
     box = _flow_box(pts[ok], prev_gray.shape[:2], window, levels)
     x0, y0 = (0, 0) if box is None else (box[1].start, box[0].start)
     if box is not None:
         prev_gray, gray = prev_gray[box], gray[box]
     p0 = (pts[ok] - (x0, y0)).astype(np.float32).reshape(-1, 1, 2)
+    out[ok] = _lk(prev_gray, gray, p0, window, levels, max_fb)
+    return out
+
+
+def _lk(prev_gray: np.ndarray, gray: np.ndarray, p0: np.ndarray, window: int, levels: int,
+        max_fb: float) -> np.ndarray:
+    """Pyramidal Lucas-Kanade of the points ``p0`` (n, 1, 2) float32 from ``prev_gray`` into
+    ``gray`` and back: their displacements (n, 2) float64, NaN where lost or back more than
+    ``max_fb`` pixels from where they started."""
     crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 20, 0.03)
     p1, st1, _ = cv2.calcOpticalFlowPyrLK(prev_gray, gray, p0, None, winSize=(window, window),
                                           maxLevel=levels, criteria=crit, flags=_LK_FLAGS)
@@ -237,19 +279,53 @@ def point_flow(prev_gray: np.ndarray, gray: np.ndarray, pts: np.ndarray, *,
     good = (st1.ravel() == 1) & (st2.ravel() == 1) & (fb < max_fb)
     d = (p1 - p0).reshape(-1, 2).astype(np.float64)
     d[~good] = np.nan
-    out[ok] = d
-    return out
+    return d
 
 
-def _flow_box(pts: np.ndarray, shape: tuple[int, int], window: int, levels: int
-              ) -> tuple[slice, slice] | None:
+def _shrunk_flow(prev_gray: np.ndarray, gray: np.ndarray, pts: np.ndarray, s: float,
+                 window: int, levels: int, max_fb: float) -> np.ndarray:
+    """:func:`_lk` of the finite points ``pts`` (n, 2) on their box (grown ``s`` times
+    :func:`_flow_box`'s margin; the whole frame where that is too much of it) shrunk ``s``
+    times, with the settings as they are: in the frame's pixels each grows ``s`` times. The
+    box is averaged over whole blocks of ``floor(s)`` pixels (OpenCV's fast area resampling)
+    and resampled linearly by the rest of ``s`` (below 2); returns the displacements in the
+    frame's pixels (n, 2)."""
+    box = _flow_box(pts, prev_gray.shape[:2], window, levels, grow=s)
+    rows, cols = box if box is not None else (slice(0, prev_gray.shape[0]),
+                                              slice(0, prev_gray.shape[1]))
+    k = max(1, min(int(s), rows.stop - rows.start, cols.stop - cols.start))
+    h, w = (rows.stop - rows.start) // k * k, (cols.stop - cols.start) // k * k
+    rows, cols = slice(rows.start, rows.start + h), slice(cols.start, cols.start + w)
+    size = (max(int(round(w / s)), 1), max(int(round(h / s)), 1))
+    a, b = (_shrunk(g[rows, cols], k, size) for g in (prev_gray, gray))
+    f = np.array([a.shape[1] / w, a.shape[0] / h])    # a pixel's centre maps to the small one's
+    p0 = ((pts - (cols.start, rows.start) + 0.5) * f - 0.5).astype(np.float32).reshape(-1, 1, 2)
+    return _lk(a, b, p0, window, levels, max_fb) / f
+
+
+def _shrunk(gray: np.ndarray, k: int, size: tuple[int, int]) -> np.ndarray:
+    """``gray`` (h, w), both multiples of ``k``, averaged over k x k blocks and then resampled
+    linearly to ``size`` (width, height) where that is not yet its size."""
+    if k > 1:
+        gray = cv2.resize(gray, (gray.shape[1] // k, gray.shape[0] // k),
+                          interpolation=cv2.INTER_AREA)
+    if (gray.shape[1], gray.shape[0]) != tuple(size):
+        gray = cv2.resize(gray, tuple(size), interpolation=cv2.INTER_LINEAR)
+    return np.ascontiguousarray(gray)
+
+
+def _flow_box(pts: np.ndarray, shape: tuple[int, int], window: int, levels: int,
+              grow: float = 1.0) -> tuple[slice, slice] | None:
     """The rows and columns :func:`point_flow` works on: the box of ``pts`` (n, 2) grown by
-    ``(window // 2 + FLOW_SLACK) * 2**levels`` pixels, its corner on the top pyramid level's
-    grid (so the crop's pyramid samples the frame's), clipped to the frame ``shape`` (H, W);
-    None when that box is more than :data:`FLOW_CROP_SHARE` of the frame."""
+    ``(window // 2 + FLOW_SLACK) * 2**levels`` pixels (times ``grow``, rounded up), its corner
+    on the top pyramid level's grid (so the crop's pyramid samples the frame's), clipped to the
+    frame ``shape`` (H, W); None when that box is more than :data:`FLOW_CROP_SHARE` of the
+    frame."""
     H, W = shape
     step = 2 ** int(levels)
     m = (int(window) // 2 + FLOW_SLACK) * step
+    if grow != 1.0:
+        m = int(np.ceil(m * float(grow)))
     lo = np.floor(pts.min(axis=0)).astype(np.int64) - m
     hi = np.ceil(pts.max(axis=0)).astype(np.int64) + m + 1
     x0, y0 = max(int(lo[0]), 0) // step * step, max(int(lo[1]), 0) // step * step
