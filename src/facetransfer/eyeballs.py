@@ -37,6 +37,7 @@ __all__ = ["GROW", "RIM_WIDTH", "LIMIT", "IRIS_CONTRAST", "IRIS_LEVEL", "BAND", 
            "Eyeballs", "extend_eyeballs", "eyeballs_of", "shift_eyeballs", "track_gaze",
            "gaze_offset", "eye_offsets", "eyeball_frames", "EYEBALL_GAIN", "EYEBALL_VIEW",
            "EYEBALL_ANGLE", "LIFT_GROW", "LIFT", "eye_room", "SKIN_SHARE", "SKIN_DISTANCE",
+           "SKIN_SPREAD_MIN", "EYE_MIN_WIDTH",
            "SKIN_RING"]
 
 #: :func:`extend_eyeballs`: the opening grows by this fraction of the eye's width (pixels of the
@@ -506,11 +507,23 @@ def eyeballs_of(image: np.ndarray, track, i: int, model, faces: np.ndarray, V: n
 
 #: :func:`eye_room`: an opening of which this share or more is the colour of the skin about it
 #: (nearer than :data:`SKIN_DISTANCE` to its median) does not show an eye (a photo's track put
-#: it on a lid: ``stills/breakingbad.jpg``'s left face, 0.32 of its right eye; three clips'
-#: reference frames 0.01-0.05, BENCHMARKS.md "Fifty-fifth session (helper photoeye55)").
-SKIN_SHARE = 0.12
-#: ... a CIELAB distance (OpenCV's 8-bit Lab), ...
-SKIN_DISTANCE = 15.0
+#: it on a lid or the nose: ``stills/breakingbad.jpg``'s left face's right eye 0.47, the right
+#: face's two 0.42; the eyes 0.07-0.19, at any exposure and in grey: BENCHMARKS.md
+#: "Fifty-fifth session (helper eyeroom55)").
+SKIN_SHARE = 0.3
+#: ... a CIELAB distance (OpenCV's 8-bit Lab) in units of the skin's own spread (the median
+#: distance of its pixels from their median, at least :data:`SKIN_SPREAD_MIN`): a picture
+#: darker, or grey, has its colours nearer, and the skin's spread shrinks with them (eyeroom55:
+#: a fixed distance of 15 read breakingbad at 0.4 times its brightness as all skin), ...
+SKIN_DISTANCE = 1.0
+#: ... the spread no less than this (a skin of one flat colour, a synthetic picture's), ...
+SKIN_SPREAD_MIN = 2.0
+#: :func:`eye_room`: an eye narrower than this (pixels, corner to corner) has no room: its iris
+#: a few pixels, its sclera one or two, too few to tell them from the lids' shade (eyeroom55:
+#: ``einstein.jpg``'s eyes, 12-15 px, and ``takeo.ppm``'s, 16-17 px, once the skin test let
+#: them move, showed a white block beside the iris and a flat grey block in the inner corner;
+#: ``breakingbad.jpg``'s are 41-65 px).
+EYE_MIN_WIDTH = 24.0
 #: ... the skin about an opening being its eye's pixels this far outside it (shares of its
 #: eye's width), in no opening.
 SKIN_RING = (0.15, 0.4)
@@ -523,7 +536,8 @@ def eye_room(image: np.ndarray, eye: np.ndarray, width: np.ndarray) -> np.ndarra
     (:func:`_iris_pixels`; not the skin's colour, :func:`_skin_like`) behind it, then ahead
     of it along that axis, in pixels: how far a move forward, then backward, may take the
     iris before it uncovers what the picture never showed. An eye whose opening shows no iris
-    beside sclera, or is :data:`SKIN_SHARE` skin or more, has no room.
+    beside sclera, or is :data:`SKIN_SHARE` skin or more (at any exposure, in colour or grey:
+    :func:`_skin_like`), or is narrower than :data:`EYE_MIN_WIDTH`, has no room.
 
     The iris and the sclera are found inside each opening's rim grown with its eye, as
     :func:`eyeballs_of` grows the rim it redoes (:func:`_rim` of the eye's own width: a turned
@@ -544,8 +558,8 @@ def eye_room(image: np.ndarray, eye: np.ndarray, width: np.ndarray) -> np.ndarra
         m = eye == e
         count = np.bincount(part[m], minlength=2)[1:]    # the part of the opening's core
         k = int(count.argmax()) + 1 if count.max() > 0 else 0
-        if k == 0 or not np.isfinite(span[k, 0]):
-            continue                     # no iris beside sclera: not an eye to turn
+        if k == 0 or not np.isfinite(span[k, 0]) or width[e] < EYE_MIN_WIDTH:
+            continue                     # no iris beside sclera (or too small to tell)
         skin = _skin_like(lab, m, eye, float(width[e]))
         if skin[m].mean() >= SKIN_SHARE:
             continue
@@ -559,9 +573,9 @@ def eye_room(image: np.ndarray, eye: np.ndarray, width: np.ndarray) -> np.ndarra
 
 def _skin_like(lab: np.ndarray, m: np.ndarray, eye: np.ndarray, width: float) -> np.ndarray:
     """``(H, W)`` bool: the pixels of the opening ``m`` (H, W) bool whose colour (``lab``
-    (H, W, 3) float64, OpenCV's 8-bit CIELAB) lies within :data:`SKIN_DISTANCE` of the
-    median of the skin about it (:data:`SKIN_RING` of the eye's ``width`` pixels outside
-    it, in no opening of ``eye`` (H, W) int8)."""
+    (H, W, 3) float64, OpenCV's 8-bit CIELAB) lies within :data:`SKIN_DISTANCE` times the
+    skin's spread of the median of the skin about it (:data:`SKIN_RING` of the eye's
+    ``width`` pixels outside it, in no opening of ``eye`` (H, W) int8)."""
     import cv2
 
     d = cv2.distanceTransform((~m).view(np.uint8), cv2.DIST_L2, 5)
@@ -569,7 +583,9 @@ def _skin_like(lab: np.ndarray, m: np.ndarray, eye: np.ndarray, width: float) ->
     out = np.zeros(m.shape, bool)
     if ring.any():
         skin = np.median(lab[ring], axis=0)
-        out[m] = np.linalg.norm(lab[m] - skin, axis=1) < SKIN_DISTANCE
+        spread = max(float(np.median(np.linalg.norm(lab[ring] - skin, axis=1))),
+                     SKIN_SPREAD_MIN)
+        out[m] = np.linalg.norm(lab[m] - skin, axis=1) < SKIN_DISTANCE * spread
     return out
 
 
