@@ -35,11 +35,14 @@ log = logging.getLogger(__name__)
 __all__ = ["partial_path", "track_row", "occluders_tested", "track_note", "track_clip",
            "ChunkResult", "track_chunk",
            "join_clip", "transfer_pair", "export_one", "count_frames", "EXPORT_EXTENSIONS",
-           "MATTE_FORMATS", "matte_pattern"]
+           "MATTE_FORMATS", "matte_pattern", "RESULT_SUFFIXES", "other_result"]
 
 #: The frame file of each ``batch transfer --matte`` format (image sequences only, one file a
 #: frame: :mod:`facetransfer.io.matte`).
 MATTE_FORMATS = {"png": ".png", "tiff": ".tif", "exr": ".exr"}
+
+#: The suffixes of ``batch transfer``'s results: ``.mp4`` (H.264, H.265), ``.mov`` (ProRes).
+RESULT_SUFFIXES = (".mp4", ".mov")
 
 #: Seconds between the saves of a clip's tracking progress (``NAME.partial.npz``): a batch
 #: stopped with Ctrl-C ends its workers, which cannot save on the way out, so a run continued
@@ -409,7 +412,8 @@ def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None
                                  progress_factory=None, align=settings["align"],
                                  max_frames=settings["max_frames"], parallel=False,
                                  video_options=settings.get("video"), matte=matte)
-        _remove_other_mattes(Path(out).parent, job.name, matte)
+        if other_result(out) is None:   # else NAME.matte/ is that result's (batchfmt55)
+            _remove_other_mattes(Path(out).parent, job.name, matte)
     conf = res.plan.target_track.confidence[:res.n_frames]
     return Row(clip=job.name, status="done", frames=res.n_frames, fps=res.plan.fps,
                seconds=time.perf_counter() - t0, mean_confidence=float(np.mean(conf)),
@@ -449,6 +453,21 @@ def _taken_video(name: str, out: str, matte: str | None, claim, t0: float) -> Ro
     return Row(clip=name, status="done", frames=info.n_frames, fps=info.fps,
                seconds=time.perf_counter() - t0, output=str(out),
                matte="" if matte is None else str(matte), note=claim.note(True))
+
+
+def other_result(out) -> Path | None:
+    """The result of the same pair in the other container beside ``out`` (``DIR/NAME.mov``
+    beside ``DIR/NAME.mp4`` and the other way round: a run of another codec into the folder),
+    None where there is none. Its matte folder ``DIR/NAME.matte/`` is then that result's: a
+    render of ``out`` does not clear it (before, a ProRes run without ``--matte`` removed the
+    H.264 results' mattes), and ``batch transfer`` does not render ``out`` with a matte there
+    (:func:`facetransfer.batch.run._mattes_of_other_results`)."""
+    o = Path(out)
+    for suffix in RESULT_SUFFIXES:
+        other = o.with_suffix(suffix)
+        if suffix != o.suffix and other.is_file():
+            return other
+    return None
 
 
 def _remove_other_mattes(out_dir: Path, name: str, matte: str | None) -> None:

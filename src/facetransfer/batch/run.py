@@ -141,18 +141,24 @@ def _error_line(exc: BaseException) -> str:
 class _Collector:
     """Collects the rows as futures finish; writes the summary; cancels on Ctrl-C."""
 
-    def __init__(self, client, names, out_dir: Path, rows: dict, progress: Progress | None,
-                 unfinished: dict | None = None):
+    #: ``{name: output}`` of the run's jobs (a cancelled row names its output)
+    outs: dict = {}
+
+    def __init__(self, client, outs: dict, out_dir: Path, rows: dict,
+                 progress: Progress | None, unfinished: dict | None = None):
         from dask.distributed import as_completed
 
-        self.client, self.names, self.rows = client, list(names), dict(rows)
+        self.client, self.names, self.rows = client, list(outs), dict(rows)
+        self.outs = outs
         self.summary = out_dir / SUMMARY_NAME
-        # the earlier rows of clips this run does not have: kept in the summary, so that their
-        # outputs' digests are not forgotten by a run of some of the clips (before, a later run
-        # of them all took a stale output for its own)
-        mine, earlier = set(self.names), _earlier_rows(out_dir)
-        self.others = [r for r in earlier if r.clip not in mine]
-        self.before = {r.clip: r for r in earlier}   # what the summary said as the run began
+        # the earlier rows of outputs this run does not make: kept in the summary, so that
+        # their digests are not forgotten by a run of some of the clips (before, a later run
+        # of them all took a stale output for its own), nor by a run of another format or
+        # codec into the folder (before, its rows replaced them: a rerun of the first
+        # refused its own outputs, batchfmt55)
+        earlier = _earlier_rows(out_dir)
+        self.others = [r for r in earlier if not _about(r, outs)]
+        self.before = _rows_about(earlier, outs)   # what the summary said as the run began
         # {clip: (digest of a cancelled row, of a failed row)}: what made its output (_unfinished)
         self.unfinished = dict(unfinished or {})
         self.progress = progress
@@ -184,11 +190,11 @@ class _Collector:
                              job=made))
 
     def write(self) -> Path:
-        rows = [self.rows.get(n) or Row(n, "cancelled",
+        rows = [self.rows.get(n) or Row(n, "cancelled", output=str(self.outs.get(n) or ""),
                                         job=self.unfinished.get(n, ("", ""))[0])
-                for n in self.names] + self.others
+                for n in self.names]
         self.last_write = time.monotonic()
-        return write_summary(self.summary, self._adopted(rows))
+        return write_summary(self.summary, self._adopted(rows) + self.others)
 
     def _adopted(self, rows: list) -> list:
         """``rows`` with the failed rows of outputs another run wrote meanwhile
@@ -213,8 +219,7 @@ class _Collector:
                     Path(r.output).name == Path(self.rows[r.clip].output).name:
                 self.rows[r.clip] = dataclasses.replace(self.rows[r.clip], job=r.job,
                                                         matte=r.matte)
-        mine = set(self.names)
-        return [self.rows.get(r.clip, r) if r.clip in mine else r for r in rows]
+        return [self.rows.get(r.clip, r) for r in rows]
 
     @contextlib.contextmanager
     def submitting(self) -> Iterator[None]:
@@ -275,12 +280,13 @@ def _model_future(client, model):
     return scatter_model(client, model)
 
 
-def _start(client, jobs, out_dir: Path, done: dict, progress: Progress | None, model,
-           unfinished: dict | None = None):
+def _start(client, jobs, outs: dict, out_dir: Path, done: dict, progress: Progress | None,
+           model, unfinished: dict | None = None):
     """The run's collector (the rows of ``done`` reported; ``unfinished``: the digests of the
     others' rows should they not finish, :func:`_unfinished`), the jobs left to do and the
     model scattered to the workers (None when nothing is left)."""
-    col = _Collector(client, [j.name for j in jobs], out_dir, done, progress, unfinished)
+    col = _Collector(client, {j.name: outs[j.name] for j in jobs}, out_dir, done, progress,
+                     unfinished)
     if progress is not None:
         for r in done.values():
             progress(r)
@@ -406,7 +412,7 @@ def batch_track(jobs, out_dir, model, *, client, options=None, chunk: int = 0,
     done = {} if overwrite else _kept(jobs, outs, out_dir, keys, lambda out, name: _done_track(
         out, by_name[name], mhash), lambda job: "" if job.occluders else
         legacy_job_key(job, what))
-    col, todo, mf = _start(client, jobs, out_dir, done, progress, model,
+    col, todo, mf = _start(client, jobs, outs, out_dir, done, progress, model,
                            _unfinished(jobs, outs, out_dir, keys))
     run = TrackSubmit(client, col, outs, mf, options, chunk, overlap, keys, _planned(outs),
                       _owners(keys))
@@ -448,14 +454,37 @@ UNKNOWN_JOB = "unknown"
 OTHER_RUN = "another-run"
 
 
-def _earlier(out_dir: Path) -> dict[str, str]:
-    """``{clip: job digest}`` of the outputs an earlier run of ``out_dir`` made, kept or
+def _about(row: Row, outs: dict | None) -> bool:
+    """Whether ``row`` of a summary is about one of ``outs`` (``{name: output}``; None: any
+    output, each clip's last row): its clip's, and its output that file (by name: the project
+    may have moved), or not said (a summary of a version before the ``output`` column). A clip exported in two formats, or transferred
+    with two codecs, into one folder has a row per output (before, one: the run of the other
+    format took it, and a rerun of the first refused its own outputs)."""
+    if outs is None:
+        return True
+    out = outs.get(row.clip)
+    return out is not None and (not row.output or Path(row.output).name == Path(out).name)
+
+
+def _rows_about(rows, outs: dict | None) -> dict[str, Row]:
+    """``{clip: row}`` of the ``rows`` about ``outs`` (:func:`_about`), one naming its output
+    before one that does not."""
+    found: dict[str, Row] = {}
+    for r in rows:
+        if _about(r, outs) and (r.clip not in found or r.output or outs is None):
+            found[r.clip] = r
+    return found
+
+
+def _earlier(out_dir: Path, outs: dict | None = None) -> dict[str, str]:
+    """``{clip: job digest}`` of the outputs ``outs`` an earlier run of ``out_dir`` made, kept or
     refused (:func:`_unfinished`: a failed row has the digest of the output it left, if any;
     a cancelled one without a digest :data:`UNKNOWN_JOB`: its output, if it appeared after
     all, was made with options nobody recorded, and is not taken as the next run's: before,
     it was, whatever that run's options)."""
-    return {r.clip: r.job or (UNKNOWN_JOB if r.status == "cancelled" else "")
-            for r in _earlier_rows(out_dir) if r.job or r.status == "cancelled"}
+    return {c: r.job or (UNKNOWN_JOB if r.status == "cancelled" else "")
+            for c, r in _rows_about(_earlier_rows(out_dir), outs).items()
+            if r.job or r.status == "cancelled"}
 
 
 def _unfinished(jobs, outs: dict, out_dir: Path, keys: dict) -> dict[str, tuple[str, str]]:
@@ -465,7 +494,7 @@ def _unfinished(jobs, outs: dict, out_dir: Path, keys: dict) -> dict[str, tuple[
     such an output, a clip tracked whole that was finishing as the run stopped); of an output
     there, none if cancelled (the task may have replaced it) and the earlier run's if failed
     (the output is that run's still; before, forgotten: the run after took it for its own)."""
-    earlier = _earlier(out_dir)
+    earlier = _earlier(out_dir, outs)
     return {j.name: ((keys[j.name], keys[j.name]) if not outs[j.name].exists()
                      else ("", earlier.get(j.name, ""))) for j in jobs}
 
@@ -483,8 +512,8 @@ def _kept(jobs, outs: dict, out_dir: Path, keys: dict, found,
     ``legacy(job)``: the job's digest of the format before; ``before(job)``: of this format
     with the options as a version before wrote them (:func:`.digest.same_job`: a summary an
     older version wrote still keeps what it finished; the row then gets the new digest)."""
-    earlier, done = _earlier(out_dir), {}
-    said = {r.clip: r for r in _earlier_rows(out_dir) if r.ok}
+    earlier, done = _earlier(out_dir, outs), {}
+    said = {c: r for c, r in _rows_about(_earlier_rows(out_dir), outs).items() if r.ok}
     for j in jobs:
         r = found(outs[j.name], j.name)
         if r is None:
@@ -584,9 +613,10 @@ class _TransferOutputs:
     the job of that row's digest, which :func:`_kept` compares) where it is whole, and is the
     one asked for (``mattes``, ``{name: pattern}``; none asked: any)."""
 
-    def __init__(self, out_dir: Path, mattes: dict) -> None:
+    def __init__(self, out_dir: Path, mattes: dict, outs: dict) -> None:
         self.out_dir, self.mattes = out_dir, mattes
-        self.earlier = {r.clip: r.matte for r in _earlier_rows(out_dir) if r.matte}
+        self.earlier = {c: r.matte for c, r in _rows_about(_earlier_rows(out_dir), outs).items()
+                        if r.matte}
 
     def __call__(self, out: Path, name: str) -> Row | None:
         r = _done_video(out, name)
@@ -635,11 +665,12 @@ def batch_transfer(jobs, out_dir, model, *, client, settings: dict, overwrite: b
     what, worded = transfer_what(settings, model), _transfer_what_before(settings, model)
     keys = job_keys(jobs, what)
     done = {} if overwrite else _kept(jobs, outs, out_dir, keys,
-                                      _TransferOutputs(out_dir, mattes),
+                                      _TransferOutputs(out_dir, mattes, outs),
                                       lambda job: legacy_job_key(job, worded),
                                       lambda job: job_keys([job], worded)[job.name])
     # a result kept without the matte asked for: the pair done again (its render gives both)
     done = {n: r for n, r in done.items() if not (r.ok and n in mattes and not r.matte)}
+    done.update(_mattes_of_other_results(jobs, outs, mattes, done))
 
     planned, owners = _planned(outs), _owners(keys)
     # a matte beside no result (a render stopped between their commits; the result removed to
@@ -654,6 +685,23 @@ def batch_transfer(jobs, out_dir, model, *, client, settings: dict, overwrite: b
                              owner=owners[job.name], pure=False)
 
     return _simple(client, jobs, out_dir, outs, done, progress, submit, model, keys)
+
+
+def _mattes_of_other_results(jobs, outs: dict, mattes: dict, done: dict) -> dict[str, Row]:
+    """The failed rows of the pairs to render with a matte (``mattes``; not in ``done``, kept or
+    refused already) whose result in the other container is beside theirs (:func:`.jobs.other_result`: a run of
+    another codec into the folder): their matte folder is that result's, neither replaced
+    nor shared (before, the render cleared or rewrote it, and the other result's rerun
+    rendered its pair again for the matte lost)."""
+    refused = {}
+    for j in jobs:
+        other = J.other_result(outs[j.name]) if j.name in mattes else None
+        if other is not None and j.name not in done:
+            folder = mattes[j.name].parent
+            refused[j.name] = Row(j.name, "failed", output=str(outs[j.name]), error=(
+                f"{folder} is the matte folder of {other} (a run of another codec into "
+                f"{other.parent}): give this run another --out folder, or no --matte"))
+    return refused
 
 
 def _planned(outs: dict) -> dict[str, str]:
@@ -736,10 +784,10 @@ def batch_export(jobs, out_dir, fmt: str, *, client, model=None, texture=None,
         lambda job: legacy_job_key(job, _export_what(fmt, repr(texture), neutral, model,
                                                      labels)))
     if fmt == "livelink":      # a take an earlier writer made (its digest's words): again
-        done = _without_unnamed_labels(done, jobs, out_dir, (
+        done = _without_unnamed_labels(done, jobs, outs, out_dir, (
             _export_what_before(fmt, value_text(texture), neutral, model),
             _export_what_before(fmt, repr(texture), neutral, model)))
-        done = _without_unnamed_labels(done, jobs, out_dir, (
+        done = _without_unnamed_labels(done, jobs, outs, out_dir, (
             _export_what_labelled(fmt, value_text(texture), neutral, model, labels),
             _export_what_labelled(fmt, repr(texture), neutral, model, labels)))
     planned = _planned(outs)   # a take written again (_without_unnamed_labels), --overwrite
@@ -791,7 +839,8 @@ def _export_what_before(fmt: str, texture: str, neutral, model) -> str:
         "default" if model is None else model.content_hash)
 
 
-def _without_unnamed_labels(done: dict, jobs, out_dir: Path, words: tuple[str, str]) -> dict:
+def _without_unnamed_labels(done: dict, jobs, outs: dict, out_dir: Path,
+                            words: tuple[str, str]) -> dict:
     """``done`` without the refused rows of takes this job wrote in a version whose digest did
     not name their labels, or (called again) their angles' signs (``words``: this job's
     options so worded, in the format of :data:`.digest.KEY_FORMAT` and in the one before it):
@@ -800,7 +849,7 @@ def _without_unnamed_labels(done: dict, jobs, out_dir: Path, words: tuple[str, s
     the new default's, and a take of the signs before (its head turning against the app's) as
     this version's; whether such a take is of the clip's labels or the app's cannot be told
     from its digest, so it is not kept."""
-    earlier, stale = _earlier(out_dir), set()
+    earlier, stale = _earlier(out_dir, outs), set()
     for j in jobs:
         r, made = done.get(j.name), earlier.get(j.name, "")
         if r is not None and not r.ok and made and same_job(
@@ -812,7 +861,7 @@ def _without_unnamed_labels(done: dict, jobs, out_dir: Path, words: tuple[str, s
 
 def _simple(client, jobs, out_dir, outs, done, progress, submit, model, keys) -> BatchResult:
     """A run of one independent task per job; each row records its job digest."""
-    col, todo, mf = _start(client, jobs, out_dir, done, progress, model,
+    col, todo, mf = _start(client, jobs, outs, out_dir, done, progress, model,
                            _unfinished(jobs, outs, out_dir, keys))
     with col.submitting():
         for job in todo:

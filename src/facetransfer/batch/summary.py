@@ -3,7 +3,9 @@
 ==================  ======================================================================
 column              meaning
 ==================  ======================================================================
-``clip``            the job's name (its output is ``DIR/NAME.<ext>``)
+``clip``            the job's name (its output is ``DIR/NAME.<ext>``); a folder holding the
+                    outputs of runs of several formats or codecs has a row per output,
+                    ``clip`` and ``output`` together naming it
 ``frames``          frames of the output (empty when it failed)
 ``fps``             frame rate
 ``seconds``         compute seconds spent on the clip in this run (all its tasks; 0 if skipped)
