@@ -111,3 +111,15 @@ def test_a_funnel_line_steeper_than_the_bound_is_flattened_through_the_medians()
     assert t[:, FUN].std() == pytest.approx(S[:, FUN].std(), rel=1e-9)   # the score's scale
     assert np.nanmedian(t[:, FUN]) == pytest.approx(np.median(A[:, FUN]), abs=1e-9)
     assert np.isnan(line.weight[ARKIT_NAMES.index("browInnerUp")])       # not a scored shape
+
+
+def test_a_shape_the_first_pass_never_moved_has_a_flat_line_of_weight_one():
+    """A shape whose first-pass activation is constant over the clip (std 0: slope 0) keeps
+    the flat line it had before the bound, weighed 1; before the lead's mend its weight was
+    0 / 0 = NaN, a NaN factor in every frame's term."""
+    A, S = _clip(F=60)
+    A[:, FUN] = 0.0
+    line = fit_score_lines(A, S)
+    assert line.slope[FUN] == 0.0 and line.weight[FUN] == 1.0
+    assert np.isfinite(line.weight[line.used()]).all()
+    assert np.all(score_targets(line, S)[:, FUN] == line.offset[FUN])

@@ -122,7 +122,7 @@ def fit_score_lines(activations: np.ndarray, scores: np.ndarray,
             continue
         b = a.std() / s.std()
         slope[k] = min(b, MAX_SLOPE.get(n, np.inf))
-        weight[k] = (b / slope[k]) ** 2
+        weight[k] = (b / slope[k]) ** 2 if slope[k] < b else 1.0   # b = 0: a flat line, 1
         offset[k] = (a.mean() - b * s.mean() if slope[k] == b
                      else np.median(a) - slope[k] * np.median(s))
     return ScoreLine(offset, slope, weight)
