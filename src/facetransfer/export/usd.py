@@ -172,6 +172,21 @@ def _animation(stage, track, activations, pxr, first: int = 0, eyes=None):
     return anim
 
 
+def _bind(stage, skel, mesh, pxr, joint: int = 0, deltas=None) -> None:
+    """Bind ``mesh`` rigidly to the skeleton's joint ``joint`` (its points in the head's frame:
+    a geometry bind transform of identity), with the 52 ARKit blend shapes of ``deltas``
+    ``(52, V, 3)`` where given."""
+    Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = pxr
+    binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
+    binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
+    binding.CreateJointIndicesPrimvar(True, 1).Set(Vt.IntArray([joint]))
+    binding.CreateJointWeightsPrimvar(True, 1).Set(Vt.FloatArray([1.0]))
+    binding.CreateGeomBindTransformAttr(Gf.Matrix4d(1))
+    if deltas is not None:
+        binding.CreateBlendShapesAttr(list(ARKIT_NAMES))
+        binding.CreateBlendShapeTargetsRel().SetTargets(_blend_shapes(stage, mesh, deltas, pxr))
+
+
 def _mouth_inside(stage, skel, rig, model, pxr) -> None:
     """The mouth's inside, ``/Face/mouthInside`` (none without a mouth gap): the glb's cone
     (:func:`facetransfer.export.gltf.mouth_cone`) in the page's cavity colour, on "head", with
@@ -197,13 +212,7 @@ def _mouth_inside(stage, skel, rig, model, pxr) -> None:
     lin = np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
     mesh.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(
         Vt.Vec3fArray([Gf.Vec3f(*map(float, lin))]))
-    binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
-    binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
-    binding.CreateJointIndicesPrimvar(True, 1).Set(Vt.IntArray([0]))
-    binding.CreateJointWeightsPrimvar(True, 1).Set(Vt.FloatArray([1.0]))
-    binding.CreateGeomBindTransformAttr(Gf.Matrix4d(1))
-    binding.CreateBlendShapesAttr(list(ARKIT_NAMES))
-    binding.CreateBlendShapeTargetsRel().SetTargets(_blend_shapes(stage, mesh, deltas, pxr))
+    _bind(stage, skel, mesh, pxr, 0, deltas)
 
 
 def _joints(eyes) -> list[str]:
@@ -232,11 +241,7 @@ def _eyeballs(stage, skel, eyes, pxr) -> None:
         mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
         mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
         mesh.CreateDisplayColorPrimvar(UsdGeom.Tokens.vertex).Set(Vt.Vec3fArray.FromNumpy(C))
-        binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
-        binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
-        binding.CreateJointIndicesPrimvar(True, 1).Set(Vt.IntArray([j + 1]))
-        binding.CreateJointWeightsPrimvar(True, 1).Set(Vt.FloatArray([1.0]))
-        binding.CreateGeomBindTransformAttr(Gf.Matrix4d(1))
+        _bind(stage, skel, mesh, pxr, j + 1)
 
 
 def write_usd(track, model, out: str | os.PathLike, *, overwrite: bool = False,
@@ -273,13 +278,7 @@ def write_usd(track, model, out: str | os.PathLike, *, overwrite: bool = False,
         [anim.GetPath()])
     mesh = _mesh(stage, rig, model, pxr)
     _root_extents(root, track, a, rig, pxr, int(first_frame))
-    binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
-    binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
-    binding.CreateJointIndicesPrimvar(True, 1).Set(Vt.IntArray([0]))
-    binding.CreateJointWeightsPrimvar(True, 1).Set(Vt.FloatArray([1.0]))
-    binding.CreateGeomBindTransformAttr(Gf.Matrix4d(1))
-    binding.CreateBlendShapesAttr(list(ARKIT_NAMES))
-    binding.CreateBlendShapeTargetsRel().SetTargets(_blend_shapes(stage, mesh, rig.deltas, pxr))
+    _bind(stage, skel, mesh, pxr, 0, rig.deltas)
     if eyes is not None:
         _eyeballs(stage, skel, eyes, pxr)
     _mouth_inside(stage, skel, rig, model, pxr)
