@@ -247,3 +247,36 @@ def record_scales(monkeypatch):
 
     monkeypatch.setattr(rewrite_clip, "rewrite_frame_part", recorded)
     return seen
+
+
+@pytest.fixture(scope="session")
+def d6_first_frames(data_dir, tmp_path_factory):
+    """``driving_d6``'s first 3 frames as a clip (a short expression source)."""
+    from facetransfer.io.video import read_video, write_video
+
+    d = tmp_path_factory.mktemp("d6")
+    frames, fps = read_video(data_dir / "video" / "driving_d6.mp4", max_frames=3)
+    write_video(d / "d6.mp4", frames, fps)
+    return d / "d6.mp4"
+
+
+def transfer_onto_breakingbad(data_dir, source, out_dir, face: str) -> int:
+    """``transfer --target stills/breakingbad.jpg --target-face FACE --expression-from
+    SOURCE`` into ``out_dir`` as a PNG sequence; its exit status."""
+    from facetransfer.cli.main import main
+
+    return main(["transfer", "--target", str(data_dir / "stills" / "breakingbad.jpg"),
+                 "--target-face", face, "--expression-from", str(source),
+                 "--out", str(out_dir / "r_%03d.png"), "--no-progress"])
+
+
+def mean_eye_span(model):
+    """``(topology, V, d)``: ``model``'s mesh topology, its mean face's vertices ``V`` (V, 3)
+    and the distance of its eyes' centres (the eye loops' means), model units."""
+    from facetransfer.topology import mesh_topology
+
+    topo = mesh_topology(model)
+    V = model.synthesize(model.default_weights())
+    c = [V[np.asarray(loop)].mean(axis=0) for loop in topo.eye_loops]
+    return topo, V, float(np.linalg.norm(c[0] - c[1]))
+

@@ -17,7 +17,7 @@ from facetransfer.rewrite_options import BlendOptions
 from facetransfer.texture.face import FaceTexture, frame_uvs
 from facetransfer.topology import close_mouth, mesh_topology
 
-from conftest import jaw_open_track, record_scales
+from conftest import jaw_open_track, mean_eye_span, record_scales
 
 SKIN = (120, 90, 72)
 LIT = tuple(int(1.6 * c) for c in SKIN)  # the closed frame's skin: beyond the gain's clip
@@ -216,10 +216,7 @@ def test_a_clips_frames_take_one_factor_for_their_shot(arkit_model, monkeypatch)
     from conftest import mean_person_track
 
     model = arkit_model
-    topo = mesh_topology(model)
-    V = model.synthesize(model.default_weights())
-    c = [V[np.asarray(loop)].mean(axis=0) for loop in topo.eye_loops]
-    d = float(np.linalg.norm(c[0] - c[1]))
+    topo, V, d = mean_eye_span(model)
     monkeypatch.setattr(face_scale, "FACE_SPAN", 50.0)      # the threshold at a small face
     factors = np.array([1.249, 1.251, 1.249, 1.251, 1.252])  # each frame's own measure
     track = mean_person_track(model, np.zeros((5, 52), np.float32), size=256, scale=10.0)

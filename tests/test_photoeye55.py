@@ -8,17 +8,14 @@ import numpy as np
 import pytest
 
 from facetransfer import eyeballs, eyes
-from facetransfer.cli.main import main
-from facetransfer.io.video import read_video, write_video
+
+from conftest import transfer_onto_breakingbad
 
 
 @pytest.fixture(scope="module")
-def source(data_dir, tmp_path_factory):
+def source(d6_first_frames):
     """``driving_d6``'s first 3 frames as a clip."""
-    d = tmp_path_factory.mktemp("d6")
-    frames, fps = read_video(data_dir / "video" / "driving_d6.mp4", max_frames=3)
-    write_video(d / "d6.mp4", frames, fps)
-    return d / "d6.mp4"
+    return d6_first_frames
 
 
 def _eyeballs(data_dir, source, tmp_path, monkeypatch, face: str) -> tuple:
@@ -31,9 +28,7 @@ def _eyeballs(data_dir, source, tmp_path, monkeypatch, face: str) -> tuple:
         return seen[-1][0]
 
     monkeypatch.setattr(eyes, "eyeballs_of", spy)
-    code = main(["transfer", "--target", str(data_dir / "stills" / "breakingbad.jpg"),
-                 "--target-face", face, "--expression-from", str(source),
-                 "--out", str(tmp_path / "r_%03d.png"), "--no-progress"])
+    code = transfer_onto_breakingbad(data_dir, source, tmp_path, face)
     assert code == 0 and len(seen) == 1
     return seen[0]
 

@@ -10,9 +10,8 @@ import numpy as np
 import pytest
 
 from facetransfer import eyeballs, face_scale
-from facetransfer.topology import mesh_topology
 
-from conftest import record_scales
+from conftest import mean_eye_span, record_scales
 
 SKIN = (150, 105, 85)
 
@@ -72,10 +71,7 @@ def test_a_run_resumed_mid_shot_takes_the_whole_shots_factor_and_a_cut_its_own(
     from conftest import mean_person_track
 
     model = arkit_model
-    topo = mesh_topology(model)
-    V = model.synthesize(model.default_weights())
-    c = [V[np.asarray(loop)].mean(axis=0) for loop in topo.eye_loops]
-    d = float(np.linalg.norm(c[0] - c[1]))
+    topo, V, d = mean_eye_span(model)
     monkeypatch.setattr(face_scale, "FACE_SPAN", 50.0)      # the threshold at a small face
     factors = np.array([1.30, 1.30, 1.249, 1.249, 1.6, 1.6, 1.6, 1.6])
     track = mean_person_track(model, np.zeros((8, 52), np.float32), size=256, scale=10.0)
