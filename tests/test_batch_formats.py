@@ -96,3 +96,24 @@ def test_two_codecs_into_one_folder_keep_each_result_and_the_matte(
     assert all(f"{k[0]}.mp4" in r["error"] and "\n" not in r["error"]
                for k, r in rows.items() if r["status"] == "failed"), rows
     assert {f.relative_to(out): f.stat().st_mtime_ns for f in out.glob("*.matte/*")} == mattes
+
+
+def test_a_matte_beside_another_codecs_result_is_refused_only_where_that_result_has_one(
+        tmp_path):
+    """A ProRes run with ``--matte`` beside an H.264 result of the same pair: refused where
+    ``NAME.matte/`` holds that result's frames, free where the H.264 run wrote no matte (the
+    folder absent or empty; before, refused too, naming a matte that did not exist)."""
+    from types import SimpleNamespace
+
+    from facetransfer.batch.run import _mattes_of_other_results
+
+    (tmp_path / "ab.mp4").write_bytes(b"h264")
+    jobs, outs = [SimpleNamespace(name="ab")], {"ab": tmp_path / "ab.mov"}
+    mattes = {"ab": tmp_path / "ab.matte" / "ab.%05d.png"}
+    assert _mattes_of_other_results(jobs, outs, mattes, {}) == {}
+    (tmp_path / "ab.matte").mkdir()
+    assert _mattes_of_other_results(jobs, outs, mattes, {}) == {}
+    (tmp_path / "ab.matte" / "ab.00000.png").write_bytes(b"png")
+    rows = _mattes_of_other_results(jobs, outs, mattes, {})
+    assert rows["ab"].status == "failed" and "ab.mp4" in rows["ab"].error
+    assert _mattes_of_other_results(jobs, outs, mattes, {"ab": rows["ab"]}) == {}

@@ -620,3 +620,25 @@ def test_an_interrupt_inside_a_compiled_kernel_keeps_the_fit_and_says_one_line(
     monkeypatch.setattr(args, "func", broken, raising=False)
     with pytest.raises(SystemError, match="a real fault"):
         cli_main._run(args)
+
+
+def test_an_older_versions_second_pass_fit_is_no_fit_not_a_damaged_file():
+    """A progress file saved mid second pass by the version before funnel55c holds its score
+    lines as (2, 52) (offsets, slopes): read now, it is no fit (its key, of FIT_VERSION 5, is
+    never taken), not "inconsistent fit arrays", which made the checkpoint throw the file's
+    finished detections away as damaged (reread55a)."""
+    import dataclasses
+
+    from facetransfer.track.fit_checkpoint import SavedFit, pack_fit, unpack_fit
+
+    F = 2
+    fit = SavedFit(identity=None, offset=np.zeros((4, 3)), frames=np.arange(F), start=0,
+                   seed=(np.eye(3), 1.0, np.zeros(2), np.zeros(5), 0.0),
+                   valid=np.ones(F, bool), rotation=np.tile(np.eye(3), (F, 1, 1)),
+                   scale=np.ones(F), translation=np.zeros((F, 2)), x=np.zeros((F, 5)),
+                   residual=np.zeros(F), forward_next=F, backward_next=-1,
+                   lines=np.zeros((3, 52)))
+    key, back = unpack_fit(pack_fit(fit, "k"))
+    assert key == "k" and back.lines.shape == (3, 52)
+    old = pack_fit(dataclasses.replace(fit, lines=np.zeros((2, 52))), "k5")
+    assert unpack_fit(old) is None

@@ -887,3 +887,32 @@ def test_a_takes_glb_and_usd_eyes_look_where_the_take_recorded(arkit_model, tmp_
             xyzw = [*q.GetImaginary(), q.GetReal()]
             np.testing.assert_allclose(Rotation.from_quat(xyzw).apply([0.0, 0.0, 1.0]), want,
                                        atol=1e-6)
+
+
+def test_a_takes_exported_eyes_each_follow_their_own_recorded_column(arkit_model, tmp_path,
+                                                                       capsys):
+    """The glb's ``eyeRight`` follows the take's ``RightEye*`` columns and ``eyeLeft`` its
+    ``LeftEye*`` (reread55c: with both eyes recorded alike, a swap of the two went unseen)."""
+    import pygltflib
+    from scipy.spatial.transform import Rotation
+    from test_export import _read_accessor
+    from test_puppet_eyes import _take_with_eye_columns
+
+    from facetransfer.cli.main import main
+    from facetransfer.track.gaze import gaze_direction
+
+    take = _take_with_eye_columns(arkit_model, tmp_path / "t.csv", LeftEyeYaw=-0.2,
+                                  LeftEyePitch=0.05, RightEyeYaw=-0.35, RightEyePitch=0.1)
+    model = tmp_path / "arkit.npz"
+    arkit_model.save(model)
+    code = main([str(x) for x in ["export", take, "--model", model,
+                                  "--out", tmp_path / "face.glb"]])
+    assert code == 0, capsys.readouterr().err
+    g = pygltflib.GLTF2().load(str(tmp_path / "face.glb"))
+    assert [n.name for n in g.nodes[1:3]] == ["eyeRight", "eyeLeft"]
+    chans = {c.target.node: g.animations[0].samplers[c.sampler].output
+             for c in g.animations[0].channels if c.target.path == "rotation"}
+    for node, want in ((1, gaze_direction([0.35, -0.1])), (2, gaze_direction([0.2, -0.05]))):
+        q = _read_accessor(g, chans[node]).astype(np.float64)
+        np.testing.assert_allclose(Rotation.from_quat(q).apply([0.0, 0.0, 1.0]),
+                                   np.tile(want, (len(q), 1)), atol=1e-6)

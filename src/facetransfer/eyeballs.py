@@ -111,7 +111,8 @@ class Eyeballs:
     def shift(self, angles: np.ndarray) -> np.ndarray:
         """``(2, 2)`` pixels, ``[eye, (x, y)]``: where gaze ``angles`` (2, 2) puts each iris in
         the reference frame, minus where its own gaze does (:attr:`iris`), at most
-        :attr:`limit` long."""
+        :attr:`limit` long; a photo's (:attr:`room`) along its eye no farther than the sclera
+        it shows, and both eyes held where either opening shows no eye."""
         d = _project(self.eyes, angles, self.pose) - self.iris
         n = np.linalg.norm(d, axis=1)
         scale = np.where(n > self.limit, self.limit / np.maximum(n, 1e-12), 1.0)
@@ -599,7 +600,8 @@ def _rim(width: np.ndarray) -> int:
 def _held(frames) -> bool:
     """Whether ``frames`` are one picture held (a photo as the target,
     :func:`facetransfer.transfer_plan.held_frames`: a read-only view of its one frame), or one
-    frame."""
+    frame (any: a one-frame plate, ``--max-frames 1``, ``transfer --frame 0`` of a video, a
+    one-frame shot; none has another frame's eyeball to take)."""
     return isinstance(frames, np.ndarray) and frames.ndim == 4 \
         and (len(frames) == 1 or frames.strides[0] == 0)
 

@@ -252,7 +252,7 @@ def take_performance(path, target_track, model, *, align: str | None = None,
                          align=align, start=start)
     _say_held(path, float(t[-1]) - start + _row_step(t, target_track.fps), len(a),
               target_track.fps, align, track_first_number(target_track),
-              _rows_rate(t, _timecode_fields(take.timecodes)) if len(t) > 1 else None)
+              take_row_rate(t, take.timecodes) if len(t) > 1 else None)
     new = take_frames(target_track, np.arange(len(a)))
     weights = dict(new.weights)
     weights["expression"] = activations_to_weights(model, np.clip(a, 0.0, 1.0))

@@ -689,15 +689,18 @@ def batch_transfer(jobs, out_dir, model, *, client, settings: dict, overwrite: b
 
 def _mattes_of_other_results(jobs, outs: dict, mattes: dict, done: dict) -> dict[str, Row]:
     """The failed rows of the pairs to render with a matte (``mattes``; not in ``done``, kept or
-    refused already) whose result in the other container is beside theirs (:func:`.jobs.other_result`: a run of
-    another codec into the folder): their matte folder is that result's, neither replaced
-    nor shared (before, the render cleared or rewrote it, and the other result's rerun
-    rendered its pair again for the matte lost)."""
+    refused already) whose result in the other container is beside theirs
+    (:func:`.jobs.other_result`: a run of another codec into the folder) with frames in their
+    matte folder: it is that result's, neither replaced nor shared (before, the render cleared
+    or rewrote it, and the other result's rerun rendered its pair again for the matte lost).
+    Where that folder is absent or empty the other result has no matte, and the pair renders
+    its own there (reread55a: it was refused, naming a matte that did not exist)."""
     refused = {}
     for j in jobs:
         other = J.other_result(outs[j.name]) if j.name in mattes else None
-        if other is not None and j.name not in done:
-            folder = mattes[j.name].parent
+        folder = mattes[j.name].parent if other is not None else None
+        if other is not None and j.name not in done and folder.is_dir() \
+                and any(folder.iterdir()):       # the other result's mattes (none: free)
             refused[j.name] = Row(j.name, "failed", output=str(outs[j.name]), error=(
                 f"{folder} is the matte folder of {other} (a run of another codec into "
                 f"{other.parent}): give this run another --out folder, or no --matte"))

@@ -1,4 +1,5 @@
-"""The summary table of a batch run: ``DIR/summary.csv``, one row per clip.
+"""The summary table of a batch run: ``DIR/summary.csv``, one row per output (a clip's; one
+per format or codec where a folder holds several).
 
 ==================  ======================================================================
 column              meaning
@@ -49,7 +50,7 @@ STATUSES = ("done", "skipped", "failed", "cancelled")
 
 @dataclass(frozen=True)
 class Row:
-    """One clip's line of ``summary.csv`` (see the module docstring)."""
+    """One output's line of ``summary.csv`` (see the module docstring)."""
 
     clip: str
     status: str

@@ -1,6 +1,6 @@
 """glTF 2.0 binary (``.glb``): the clip's person with 52 ARKit morph targets and the performance.
 
-The file holds one node ``face`` with one mesh: the person's neutral face (the track's identity,
+The file holds a node ``face`` with the face mesh: the person's neutral face (the track's identity,
 Eq. (9)) with the template's UVs (v flipped: glTF's origin is the image's top left), vertex
 normals, optionally the texture lifted from the video as its base colour, and 52 morph targets
 (``POSITION`` deltas ``f_j - f_0``, :func:`facetransfer.arkit.expression_rig`, and ``NORMAL``
@@ -10,8 +10,9 @@ normals shades an open jaw as open) named in
 three.js, Blender and Babylon read). One animation ``performance`` has a ``weights`` channel with
 one key per frame (time ``k / fps``, LINEAR) whose values are the track's activations, and the
 head pose as the node's ``rotation`` and ``translation`` channels (same keys). Behind the
-face's eye holes, two eyeball nodes (``eyeRight``, ``eyeLeft``: children of ``face``) turned by
-the gaze the eyeLook* curves say, a ``rotation`` channel each (:mod:`.gltf_eyes`; not for a
+face's eye holes, two eyeball nodes (``eyeRight``, ``eyeLeft``: children of ``face``, one
+shared ``eyeball`` mesh) turned by the gaze of :func:`.gltf_eyes.track_eye_gaze` (a take's
+recorded eye angles, else the eyeLook* curves), a ``rotation`` channel each (not for a
 model without landmarks), and the mouth's inside, a second primitive of the face mesh with its
 own morph targets (:func:`_mouth_inside`): the lips' gap no longer shows what is behind the
 head. Positions are in
@@ -340,14 +341,14 @@ def _mouth_inside(gltf, blob: _Blob, model, V: np.ndarray, deltas: list) -> list
     a player showed what was behind the head there)."""
     from pygltflib import Attributes, Material, PbrMetallicRoughness, Primitive
 
+    from ..io.exr import srgb_decode
     from ..palette import PALETTE
 
     cone = mouth_cone(model, V, deltas)
     if cone is None:
         return []
     P, fan, cone_deltas = cone
-    srgb = np.asarray(PALETTE["cavity"], np.float64) / 255.0
-    lin = np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
+    lin = srgb_decode(np.asarray(PALETTE["cavity"], np.uint8))
     gltf.materials.append(Material(name="mouth", doubleSided=True,
                                    pbrMetallicRoughness=PbrMetallicRoughness(
                                        baseColorFactor=[float(c) for c in lin] + [1.0],

@@ -14,7 +14,9 @@ subject's left, +x; pitch up, +y), so +z, the pupil, points along
 :func:`facetransfer.track.gaze.gaze_direction`; a Live Link Face take's by its recorded eye
 angles where it has them, as the puppet and the ``view`` page turn them
 (:func:`track_eye_gaze`). The lids (the face's morph targets) close over
-them. Nodes ``eyeRight`` and ``eyeLeft``: the subject's own, as ARKit names them. The USD
+them, but for a strip: the default model's shut lids leave a gap of about 0.2 cm, through which
+0.34-0.37 cm² of each eyeball shows from the front (BENCHMARKS.md, fifty-fifth session, helpers
+review55b and eyelid55). Nodes ``eyeRight`` and ``eyeLeft``: the subject's own, as ARKit names them. The USD
 export (:mod:`facetransfer.export.usd`) has the same eyeballs, bound to joints of those names
 below its ``head``.
 """
@@ -73,13 +75,13 @@ def track_eye_gaze(track, activations: np.ndarray) -> np.ndarray:
 
 def _colour(theta: np.ndarray) -> np.ndarray:
     """Linear RGB of the eyeball at polar angles ``theta`` (radians from +z)."""
+    from ..io.exr import srgb_decode
     from ..palette import PALETTE
     from .viewer import IRIS_ANGLE, PUPIL_ANGLE
 
     deg = np.degrees(theta)
     name = np.where(deg < PUPIL_ANGLE, "pupil", np.where(deg < IRIS_ANGLE, "iris", "sclera"))
-    srgb = np.array([PALETTE[str(n)] for n in name], np.float64) / 255.0
-    return np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
+    return srgb_decode(np.array([PALETTE[str(n)] for n in name], np.uint8)).astype(np.float64)
 
 
 def eyeball_mesh():

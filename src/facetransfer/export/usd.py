@@ -191,6 +191,7 @@ def _mouth_inside(stage, skel, rig, model, pxr) -> None:
     """The mouth's inside, ``/Face/mouthInside`` (none without a mouth gap): the glb's cone
     (:func:`facetransfer.export.gltf.mouth_cone`) in the page's cavity colour, on "head", with
     52 blend shapes of its own (the lips' deltas), so an open jaw opens onto it."""
+    from ..io.exr import srgb_decode
     from ..palette import PALETTE
     from .gltf import mouth_cone
 
@@ -208,8 +209,7 @@ def _mouth_inside(stage, skel, rig, model, pxr) -> None:
     mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
     mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
     mesh.CreateDoubleSidedAttr(True)
-    srgb = np.asarray(PALETTE["cavity"], np.float64) / 255.0
-    lin = np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
+    lin = srgb_decode(np.asarray(PALETTE["cavity"], np.uint8))
     mesh.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(
         Vt.Vec3fArray([Gf.Vec3f(*map(float, lin))]))
     _bind(stage, skel, mesh, pxr, 0, deltas)

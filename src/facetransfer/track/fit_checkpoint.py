@@ -129,6 +129,8 @@ def unpack_fit(entries: dict) -> tuple[str, SavedFit] | None:
     d = {k[len(PREFIX):]: v for k, v in entries.items() if k.startswith(PREFIX)}
     F = len(d["valid"])
     lines = np.asarray(d.get("lines", np.zeros((0, 52))), np.float64)
+    if lines.shape == (2, 52):     # an older version's (FIT_VERSION 5): its key is never taken,
+        return None                # and the file's detections are kept, not called damaged
     shapes = {"rotation": (F, 3, 3), "scale": (F,), "translation": (F, 2), "residual": (F,)}
     if any(d[k].shape != v for k, v in shapes.items()) or d["x"].shape[0] != F \
             or d["offset"].ndim != 2 or not 0 <= int(d["start"]) < F \

@@ -102,7 +102,10 @@ def fit_score_lines(activations: np.ndarray, scores: np.ndarray,
     ScoreLine
         ``slope = std(a) / std(s)``, ``offset = mean(a) - slope mean(s)`` over the frames where
         both are known; where that slope exceeds :data:`MAX_SLOPE`, the bound, ``offset =
-        median(a) - slope median(s)`` and a ``weight`` above 1. No line where fewer than 8 such
+        median(a) - slope median(s)`` and a ``weight`` of ``(b / bound)²`` (``b`` the unbounded
+        slope), so that a unit of the score weighs in the fit as the unbounded line's did: on
+        a clip whose detector's funnel hardly moves that is large (WDA_KatieHill_000: 8.7), and
+        the term holds the funnel near the detector's flat line, as it did before the bound. No line where fewer than 8 such
         frames exist or the score's std is below :data:`MIN_SCORE_STD`.
     """
     A, S = np.asarray(activations, np.float64), np.asarray(scores, np.float64)

@@ -256,7 +256,7 @@ def _run(frames: FrameSource, model, init, opt: TrackOptions, detector, progress
     else:  # an interrupted run of the same video, model and options
         start, L0, state0 = resume.start, np.asarray(resume.L0), resume.state0
         log.info("resuming from %s: pass %d, frame %d", checkpoint.path,
-                 resume.pass_index + 1, resume.next_frame)
+                 resume.pass_index + 1, n0 + resume.next_frame)   # a plate's: its number
     t_init = time.perf_counter() - t_start
     run = _Run(frames, model, tr, detect, checkpoint, progress or _no_progress, start, L0,
                state0)
