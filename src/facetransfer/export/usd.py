@@ -53,17 +53,25 @@ def _pxr():
     return Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt
 
 
-def _mesh(stage, rig, model, pxr):
+def _tri_mesh(stage, path: str, points: np.ndarray, tris: np.ndarray, pxr):
+    """A triangle ``UsdGeom.Mesh`` at ``path``: ``points`` (n, 3), ``tris`` (m, 3) or flat, its
+    extent the points' box, right-handed, not subdivided."""
     Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = pxr
-    mesh = UsdGeom.Mesh.Define(stage, "/Face/Mesh")
-    faces = np.asarray(model.faces, np.int32)
-    points = Vt.Vec3fArray.FromNumpy(rig.neutral.astype(np.float32))
-    mesh.CreatePointsAttr(points)
-    mesh.CreateExtentAttr(UsdGeom.Mesh.ComputeExtent(points))  # the rest pose's box
-    mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(faces), 3, np.int32)))
-    mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(faces.ravel()))
+    mesh = UsdGeom.Mesh.Define(stage, path)
+    tris = np.asarray(tris, np.int32).reshape(-1, 3)
+    pts = Vt.Vec3fArray.FromNumpy(np.asarray(points, np.float32))
+    mesh.CreatePointsAttr(pts)
+    mesh.CreateExtentAttr(UsdGeom.Mesh.ComputeExtent(pts))
+    mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(tris), 3, np.int32)))
+    mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(tris.ravel()))
     mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
     mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    return mesh
+
+
+def _mesh(stage, rig, model, pxr):
+    Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = pxr
+    mesh = _tri_mesh(stage, "/Face/Mesh", rig.neutral, model.faces, pxr)   # rest pose's box
     if model.uvs is not None:
         st = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray,
                                                      UsdGeom.Tokens.vertex)
@@ -200,14 +208,7 @@ def _mouth_inside(stage, skel, rig, model, pxr) -> None:
     if cone is None:
         return
     P, fan, deltas = cone
-    mesh = UsdGeom.Mesh.Define(stage, "/Face/mouthInside")
-    points = Vt.Vec3fArray.FromNumpy(P)
-    mesh.CreatePointsAttr(points)
-    mesh.CreateExtentAttr(UsdGeom.Mesh.ComputeExtent(points))
-    mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(fan), 3, np.int32)))
-    mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(fan.ravel().astype(np.int32)))
-    mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
-    mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    mesh = _tri_mesh(stage, "/Face/mouthInside", P, fan, pxr)
     mesh.CreateDoubleSidedAttr(True)
     lin = srgb_decode(np.asarray(PALETTE["cavity"], np.uint8))
     mesh.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(
@@ -232,14 +233,7 @@ def _eyeballs(stage, skel, eyes, pxr) -> None:
     Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = pxr
     P, C, T = eyeball_mesh()
     for j, (name, centre, radius) in enumerate(zip(EYE_NODES, *eyes)):
-        mesh = UsdGeom.Mesh.Define(stage, f"/Face/{name}")
-        points = Vt.Vec3fArray.FromNumpy((P * radius + centre).astype(np.float32))
-        mesh.CreatePointsAttr(points)
-        mesh.CreateExtentAttr(UsdGeom.Mesh.ComputeExtent(points))
-        mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(T) // 3, 3, np.int32)))
-        mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(T.ravel().astype(np.int32)))
-        mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
-        mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+        mesh = _tri_mesh(stage, f"/Face/{name}", P * radius + centre, T, pxr)
         mesh.CreateDisplayColorPrimvar(UsdGeom.Tokens.vertex).Set(Vt.Vec3fArray.FromNumpy(C))
         _bind(stage, skel, mesh, pxr, j + 1)
 
