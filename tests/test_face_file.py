@@ -186,3 +186,35 @@ def test_an_identity_beyond_the_models_is_refused_as_identity_weights_are(arkit_
             face_weights(read_face(path), arkit_model)
     row = _face(tmp_path / "t.json", arkit_model, identity=[float(v) for v in U[2]])
     np.testing.assert_array_equal(face_weights(read_face(row), arkit_model)["identity"], U[2])
+
+
+def test_a_face_of_another_model_names_the_positional_model_argument(
+        arkit_model, quick_model, tmp_path, capsys, monkeypatch):
+    """``model synth`` and ``render`` take their model as the MODEL argument, not ``--model``:
+    a face dialled on the default model, given another, was told to "leave out --model" (an
+    option these commands do not have); a face of another version's kept default model was
+    told to "give --model P". Now both name MODEL."""
+    import facetransfer.default_model as dm
+    import facetransfer.model_hint as mh
+    from facetransfer.cli.model import positional_hint
+
+    mp = tmp_path / "q.npz"
+    quick_model.save(mp)
+    face = _face(tmp_path / "f.json", arkit_model)
+    monkeypatch.setattr(mh, "current_default_hash", lambda: arkit_model.content_hash)
+    for argv in (["model", "synth", str(mp), "--face", str(face), "--out", str(tmp_path / "o.obj")],
+                 ["render", str(mp), "--face", str(face), "--out", str(tmp_path / "o.png")]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.endswith("(made with the default model: leave out MODEL)"), err
+        assert "--model" not in err and len(err.splitlines()) == 1
+    kept = tmp_path / "cache" / "ict-arkit-default-v1-0123.npz"
+    monkeypatch.setattr(mh, "current_default_hash", lambda: None)
+    monkeypatch.setattr(dm, "kept_model", lambda h: kept if h == arkit_model.content_hash else None)
+    assert main(["model", "synth", str(mp), "--face", str(face),
+                 "--out", str(tmp_path / "o.obj")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.endswith(f"kept at {kept}: give {kept} as MODEL)"), err
+    # an option's command keeps the option's name
+    assert positional_hint("x (made with the default model: leave out --model)", "--model") \
+        .endswith("leave out --model)")

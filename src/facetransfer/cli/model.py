@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import re
 import sys
 from pathlib import Path
 
@@ -291,15 +292,31 @@ def face_arg(args):
     return read_face(args.face)
 
 
-def face_or_weights(model, args, face) -> dict[str, np.ndarray]:
+def face_or_weights(model, args, face, *, model_arg: str = "--model") -> dict[str, np.ndarray]:
     """The weights of ``face`` (a face saved by the dial editor, :func:`face_arg`), else of
-    ``--weights`` / ``--like`` (:func:`synth_weights`)."""
+    ``--weights`` / ``--like`` (:func:`synth_weights`). ``model_arg``: how the command takes
+    its model, named by a refusal of a face dialled on another (``"MODEL"``: a positional
+    argument, :func:`positional_hint`)."""
     if face is not None:
-        from ..face_file import face_weights
+        from ..face_file import FaceFileError, face_weights
 
-        return face_weights(face, model)
+        try:
+            return face_weights(face, model)
+        except FaceFileError as err:
+            if model_arg == "--model":
+                raise
+            raise FaceFileError(positional_hint(str(err), model_arg)) from None
     return synth_weights(model, parse_weights(args.weights) if args.weights else None,
                          parse_like(args.like) if args.like else None)
+
+
+def positional_hint(message: str, model_arg: str) -> str:
+    """``message`` (a refusal of a file made with another model,
+    :func:`facetransfer.model_hint.model_hint`) for a command whose model is its positional
+    ``model_arg``, not ``--model``: "leave out --model" -> "leave out MODEL", "give --model P"
+    -> "give P as MODEL"."""
+    message = message.replace("leave out --model", f"leave out {model_arg}")
+    return re.sub(r"give --model (.+?)\)$", rf"give \1 as {model_arg})", message)
 
 
 def _unturned(face) -> str:
@@ -317,7 +334,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
     check_output_path(out, overwrite=args.overwrite, inputs=[args.model, args.face])
     face = face_arg(args)
     m = resolve_model(args.model)
-    v = m.synthesize(face_or_weights(m, args, face))
+    v = m.synthesize(face_or_weights(m, args, face, model_arg="MODEL"))
     write_mesh(out, v, m.faces, uvs=m.uvs if out.suffix.lower() == ".obj" else None,
                overwrite=args.overwrite)
     print(f"wrote {out} ({m.n_vertices} vertices)" + _unturned(face))
