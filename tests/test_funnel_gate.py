@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from facetransfer.arkit import ARKIT_NAMES
+from facetransfer.errors import ShapeError
 from facetransfer.render import rotation_from_euler
 from facetransfer.track.capture import CaptureOptions, funnel_ridges
 from facetransfer.track.capture_frame import LIPS_APART, LIPS_SHUT, lips_gap, lips_gate
@@ -33,7 +34,7 @@ def test_lips_gap_is_the_inner_lips_mean_gap_over_the_eye_corners_at_any_similar
     np.testing.assert_allclose(lips_gap(np.stack([P, moved])), [0.1, 0.1], rtol=1e-12)
     P[62] = np.nan
     assert np.isnan(lips_gap(P[None]))[0]
-    with pytest.raises(ValueError, match=r"\(2, 68\)"):
+    with pytest.raises(ShapeError, match=r"\(2, 68\)"):
         lips_gap(np.zeros((2, 68)))
 
 

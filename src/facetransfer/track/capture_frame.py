@@ -6,6 +6,8 @@ Gauss-Newton) alternated with the expression (Eq. (9): bounded least squares for
 activations, the training prior for other modes), the eyeLook* activations following the iris
 centres at each pose (:mod:`facetransfer.track.gaze`). The capture's yaw is that of ``R = Rx(a)
 Ry(b) Rz(c)`` (:func:`sin_yaw`; :mod:`facetransfer.render.cameras` names the conventions).
+The detected lips' gap and how shut it says they are (:func:`lips_gap`, :func:`lips_gate`) gate
+the funnel (:func:`facetransfer.track.capture.funnel_ridges`).
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import ShapeError
 from .camera import Pose, fit_affine_pose
 from .capture_points import Shape
 from .detect import ClipDetections
@@ -157,7 +160,7 @@ def lips_gap(points: np.ndarray) -> np.ndarray:
     the weak-perspective camera of Eq. (7) the ratio changes little with the head's pose."""
     P = np.asarray(points, np.float64)
     if P.ndim != 3 or P.shape[1:] != (68, 2):
-        raise ValueError(f"lips_gap needs iBUG points (F, 68, 2), got {P.shape}")
+        raise ShapeError(f"lips_gap needs iBUG points (F, 68, 2), got {P.shape}")
     gap = np.linalg.norm(P[:, [61, 62, 63]] - P[:, [67, 66, 65]], axis=2).mean(axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
         return gap / np.linalg.norm(P[:, 36] - P[:, 45], axis=1)
