@@ -60,8 +60,8 @@ from ..io.frame_numbers import first_number, frame_span
 from .aspect import stored_pixels
 from .camera import Pose
 from . import capture_points
-from .capture_frame import (FrameState, PointWeights, detection_targets, fit_frame,
-                            iris_of, sin_yaw)
+from .capture_frame import (FrameState, PointWeights, detection_targets, fit_frame, iris_of,
+                            lips_gap, lips_gate, sin_yaw)
 from .capture_points import Sampler, Shape
 from .detect import ClipDetections
 from .fit_checkpoint import SavedFit, fit_key
@@ -198,6 +198,14 @@ class CaptureOptions:
         one (:mod:`facetransfer.track.lip_contact`: the inner-lip gaps, linear in the
         activations, held >= 0, or at the neutral face's own gap where that is below 0, in
         each expression step where the box solution crosses them).
+    funnel_gate : float
+        For an ARKit model: an extra ridge on mouthFunnel, in units of ``expression_prior``,
+        in the frames whose detected lips are shut (their gap at or below
+        :data:`~facetransfer.track.capture_frame.LIPS_SHUT` of the eye-corner distance), ramped
+        to 0 as they part (at :data:`~facetransfer.track.capture_frame.LIPS_APART`), in the
+        pass whose activations are kept (the second when there is one: the first's funnel
+        scales the detector's score line). ARKit's funnel rounds lips that are open; shut
+        lips pushed out are a pucker. 0 = off.
     """
 
     identity_frames: int = 24
@@ -219,6 +227,7 @@ class CaptureOptions:
     view_offset_prior: float = 1e-4
     pitch_gain: float = DETECTOR_PITCH_GAIN
     lip_contact: bool = True
+    funnel_gate: float = 100.0
 
     def __post_init__(self) -> None:
         for name in ("identity_frames", "identity_rounds", "iterations"):
@@ -226,7 +235,7 @@ class CaptureOptions:
                 raise TrackError(f"{name} must be >= 1, got {getattr(self, name)}")
         for name in ("identity_prior", "expression_prior", "sparsity", "temporal", "slow_temporal", "flow",
                      "smooth", "dense", "offset_prior", "identity_expression_prior", "scores",
-                     "view_offset_prior"):
+                     "view_offset_prior", "funnel_gate"):
             if not float(getattr(self, name)) >= 0:
                 raise TrackError(f"{name} must be >= 0, got {getattr(self, name)}")
         if not 0.5 <= float(self.pitch_gain) <= 2.0:
@@ -375,7 +384,7 @@ def _track_run(shape: Shape, det: ClipDetections, order: list, seed: FrameState 
         st = fit_frame(shape, tg, eye_distance(det.points[i]), None if prev is None else prev.pose,
                         shape.x0 if prev is None else prev.x,
                         None if prev is None or prev_i is None else prev.x, int(opt.iterations),
-                        iris_of(weights, i), weights.anchor(i))
+                        iris_of(weights, i), weights.anchor(i), weights.ridge(i))
         states[i] = st
         prev, prev_i = st, i
         done += 1
@@ -588,16 +597,36 @@ def _track_passes(run: "_FitRun", det: ClipDetections, weights: PointWeights,
                   opt: CaptureOptions, prog, maybe_save) -> None:
     """Track the clip both ways (continuing ``run``); for an ARKit model with the detector's
     scores and ``opt.scores > 0`` then once more with each frame pulled toward its mapped
-    scores (:mod:`facetransfer.track.scores`; progress stage ``"refine"``)."""
+    scores (:mod:`facetransfer.track.scores`; progress stage ``"refine"``). The funnel's
+    ridge where the lips are shut (:func:`funnel_ridges`) is in the last pass only: the
+    first pass's funnel sets the score line's slope.
+    """
+    refine = opt.scores > 0 and det.scores is not None and run.shape.arkit
+    final = replace(weights, ridges=funnel_ridges(run.shape, det.points, opt))
     if run.lines is None:
-        _track_both(run, det, weights, opt, prog, maybe_save)
-        if not (opt.scores > 0 and det.scores is not None and run.shape.arkit):
+        _track_both(run, det, weights if refine else final, opt, prog, maybe_save)
+        if not refine:
             return
         run.begin_refine(_score_lines(run, det))
     anchors = score_targets(run.lines, det.scores)[:, run.shape.used]
-    _track_both(run, det, replace(weights, anchors=anchors,
+    _track_both(run, det, replace(final, anchors=anchors,
                                   anchor_weights=run.lines.weight[run.shape.used]), opt,
                 lambda stage, done, total: prog("refine", done, total), maybe_save)
+
+
+def funnel_ridges(shape: Shape, points: np.ndarray, opt: CaptureOptions) -> np.ndarray | None:
+    """The extra ridge of every frame's activations (F, K): on mouthFunnel
+    ``opt.funnel_gate · opt.expression_prior`` times how shut the detected lips are
+    (:func:`~facetransfer.track.capture_frame.lips_gate` of the iBUG ``points`` (F, 68, 2)),
+    0 elsewhere (§5, Eq. (9)'s bounded least squares); None for a model without ARKit
+    activations, without a funnel, or with the gate off."""
+    name = ARKIT_NAMES.index("mouthFunnel")
+    if not (shape.arkit and opt.funnel_gate > 0 and name in shape.used):
+        return None
+    ridges = np.zeros((len(points), shape.size))
+    ridges[:, int(np.flatnonzero(shape.used == name)[0])] = \
+        opt.funnel_gate * opt.expression_prior * lips_gate(lips_gap(points))
+    return ridges
 
 
 def _score_lines(run: "_FitRun", det: ClipDetections) -> ScoreLine:

@@ -6,6 +6,8 @@ Gauss-Newton) alternated with the expression (Eq. (9): bounded least squares for
 activations, the training prior for other modes), the eyeLook* activations following the iris
 centres at each pose (:mod:`facetransfer.track.gaze`). The capture's yaw is that of ``R = Rx(a)
 Ry(b) Rz(c)`` (:func:`sin_yaw`; :mod:`facetransfer.render.cameras` names the conventions).
+The detected lips' gap and how shut it says they are (:func:`lips_gap`, :func:`lips_gate`) gate
+the funnel (:func:`facetransfer.track.capture.funnel_ridges`).
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import ShapeError
 from .camera import Pose, fit_affine_pose
 from .capture_points import Shape
 from .detect import ClipDetections
@@ -21,7 +24,14 @@ from .fit2d import Targets, pose_gauss_newton
 from .gaze import frame_gaze_activations
 
 __all__ = ["FrameState", "PointWeights", "sin_yaw", "residual_rms", "gaze_fixed",
-           "fit_frame", "detection_targets", "iris_of"]
+           "fit_frame", "detection_targets", "iris_of", "lips_gap", "lips_gate", "LIPS_SHUT",
+           "LIPS_APART"]
+
+#: The inner lips' gap (:func:`lips_gap`, eye-corner distances) at or below which the lips are
+#: shut (their 10th-90th percentiles on the real clips' shut mouths: 0.004-0.016) ...
+LIPS_SHUT = 0.02
+#: ... and at or above which they are apart (a real "O": 0.06-0.35, 10th percentile 0.11)
+LIPS_APART = 0.05
 
 
 @dataclass(frozen=True)
@@ -67,10 +77,11 @@ def gaze_fixed(shape: Shape, pose: Pose, x: np.ndarray, gaze: tuple,
 
 def fit_frame(shape: Shape, targets: Targets, iod: float, pose: Pose | None, x: np.ndarray,
                prev: np.ndarray | None, iterations: int, gaze: tuple | None = None,
-               anchor: tuple | None = None) -> FrameState:
+               anchor: tuple | None = None, ridge: np.ndarray | None = None) -> FrameState:
     """Alternate pose (Gauss-Newton, Eq. (7)) and expression (bounded or prior-weighted LS,
     Eq. (9)) for one frame (``targets``: the detections first); with ``gaze`` (:func:`iris_of`;
-    ARKit models) the eyeLook* activations follow the iris at each pose."""
+    ARKit models) the eyeLook* activations follow the iris at each pose; ``anchor`` and
+    ``ridge`` (K,) as in :meth:`Shape.solve`."""
     p, w = targets.p[0], targets.w[0]
     base = shape
     if pose is None:
@@ -84,7 +95,7 @@ def fit_frame(shape: Shape, targets: Targets, iod: float, pose: Pose | None, x: 
         pose = pose_gauss_newton(X, targets, pose, iod, iterations=1)
         shape = base.at_view(sin_yaw(pose))
         held, after = (None, None) if gaze is None else gaze_fixed(shape, pose, x, gaze, X)
-        x = shape.solve(pose, targets, iod, x, prev, held, anchor)
+        x = shape.solve(pose, targets, iod, x, prev, held, anchor, ridge)
         X = shape.points(x)
     if after is not None:
         x = np.where(np.isfinite(after), after, x)
@@ -103,6 +114,7 @@ class PointWeights:
     closed: np.ndarray | None = None   # (F, 2) eyes with closed lids (vertical gaze free)
     anchors: np.ndarray | None = None  # (F, K) mapped detector scores (NaN: none)
     anchor_weights: np.ndarray | None = None  # (K,) their terms' factors (ScoreLine.weight)
+    ridges: np.ndarray | None = None   # (F, K) extra ridge toward 0 per frame (lips_gate)
 
     def flow_nominal(self, flow: float) -> np.ndarray:
         """Summed weights (P,) of the detection and flow terms with every point known (the
@@ -119,6 +131,10 @@ class PointWeights:
         w = np.ones(self.anchors.shape[1]) if self.anchor_weights is None else self.anchor_weights
         return self.anchors[i], w
 
+    def ridge(self, i: int) -> np.ndarray | None:
+        """Frame ``i``'s extra ridge on the activations toward 0 (K,), or None."""
+        return None if self.ridges is None else self.ridges[i]
+
 
 def detection_targets(det: ClipDetections, i: int, pw: PointWeights) -> tuple[np.ndarray, np.ndarray]:
     """Frame ``i``'s targets for the tracked points and their weights (0 where unknown)."""
@@ -134,3 +150,28 @@ def iris_of(weights: PointWeights, i: int) -> tuple | None:
     if weights.iris is None or not np.isfinite(weights.iris[i]).any():
         return None
     return weights.iris[i], weights.closed[i]
+
+
+def lips_gap(points: np.ndarray) -> np.ndarray:
+    """The inner lips' gap of iBUG points ``(F, 68, 2)``: the mean distance of the pairs 61-67,
+    62-66, 63-65 over the outer eye corners' (36-45), ``(F,)``; NaN where a point is unknown.
+
+    Both are distances between points symmetric about the face's midline or along it, so under
+    the weak-perspective camera of Eq. (7) the ratio changes little with the head's pose."""
+    P = np.asarray(points, np.float64)
+    if P.ndim != 3 or P.shape[1:] != (68, 2):
+        raise ShapeError(f"lips_gap needs iBUG points (F, 68, 2), got {P.shape}")
+    gap = np.linalg.norm(P[:, [61, 62, 63]] - P[:, [67, 66, 65]], axis=2).mean(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return gap / np.linalg.norm(P[:, 36] - P[:, 45], axis=1)
+
+
+def lips_gate(gap: np.ndarray, shut: float = LIPS_SHUT, apart: float = LIPS_APART
+              ) -> np.ndarray:
+    """How shut the lips are, from their gap ``(F,)`` (:func:`lips_gap`): 1 at or below
+    ``shut``, 0 at or above ``apart``, linear between; 0 where the gap is unknown, ``(F,)``."""
+    if not apart > shut:
+        raise ValueError(f"lips_gate needs apart > shut, got shut {shut}, apart {apart}")
+    with np.errstate(invalid="ignore"):
+        g = np.clip((apart - np.asarray(gap, np.float64)) / (apart - shut), 0.0, 1.0)
+    return np.where(np.isfinite(g), g, 0.0)

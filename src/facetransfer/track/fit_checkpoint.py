@@ -31,8 +31,9 @@ __all__ = ["FIT_VERSION", "fit_key", "SavedFit", "pack_fit", "unpack_fit"]
 #: bumped when the saved fit changes layout or meaning (older fits are then ignored)
 #: 2: the second pass (score lines); 3: the inner lips weighed up (INNER_LIPS); 4: the lips'
 #: contact held (lip_contact); 5: that contact solved exactly (contact_qp by its dual); 6:
-#: the score lines' weights (a bounded slope)
-FIT_VERSION = 6
+#: the score lines' weights (a bounded slope); 7: the funnel's ridge where the lips are shut
+#: (``CaptureOptions.funnel_gate``)
+FIT_VERSION = 7
 #: prefix of the fit's entries in the progress file
 PREFIX = "fit_"
 
