@@ -193,3 +193,26 @@ def test_tex_size_must_be_a_size_or_auto(quick_model):
     frames, track, topo, _ = _scene(m, 128, 4.0)
     with pytest.raises(RewriteError, match="'auto'"):
         ftex.mouth_texture_function(m, frames, track, topo, tex_size="big")
+
+
+def test_the_transfers_mouth_function_lifts_at_the_faces_size(monkeypatch):
+    """``TransferPlan.mouth_function`` (the CLI's path, ``video_transfer._lift_mouth``) asks for
+    ``tex_size="auto"`` of the target's frames and of a resampled mouth source alike; a size
+    given is passed on."""
+    from types import SimpleNamespace
+
+    from facetransfer import transfer_plan as tp
+
+    seen = []
+    monkeypatch.setattr(tp, "mouth_texture_function",
+                        lambda *a, **kw: seen.append(("target", kw.get("tex_size"))))
+    monkeypatch.setattr(tp, "timeline_mouth_function",
+                        lambda *a, **kw: seen.append(("timeline", kw.get("tex_size"))))
+    track = SimpleNamespace(n_frames=3)
+    own = SimpleNamespace(texture_frames=np.zeros((3, 4, 4, 3), np.uint8), texture_track=track)
+    other = SimpleNamespace(texture_frames=None, texture_track=None, mouth_frames=None,
+                            mouth_track=track, mouth_index=np.arange(3), n_frames=3)
+    tp.TransferPlan.mouth_function(own, None)
+    tp.TransferPlan.mouth_function(other, None)
+    tp.TransferPlan.mouth_function(own, None, tex_size=64)
+    assert seen == [("target", "auto"), ("timeline", "auto"), ("target", 64)]
