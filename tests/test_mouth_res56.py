@@ -216,3 +216,19 @@ def test_the_transfers_mouth_function_lifts_at_the_faces_size(monkeypatch):
     tp.TransferPlan.mouth_function(other, None)
     tp.TransferPlan.mouth_function(own, None, tex_size=64)
     assert seen == [("target", "auto"), ("timeline", "auto"), ("target", 64)]
+
+
+def test_a_mesh_without_a_mouth_lays_out_the_whole_atlas_at_the_old_density(quick_model):
+    """No mouth triangles (a model whose mesh has no mouth gap): the square is the whole UV
+    layout at 256 texels per UV unit (the old 256² atlas), not an error."""
+    import dataclasses
+
+    m = quick_model
+    frames, track, topo, _ = _scene(m, 256, 4.0)
+    bare = dataclasses.replace(topo, mouth_faces=np.zeros(0, np.int64))
+    uvs = np.vstack([m.uvs, m.uvs[topo.mouth_loop].mean(0)])
+    lay = ftex.mouth_layout(m, track, bare, uvs, np.arange(len(frames)))
+    assert lay.pixels_per_uv == 0.0
+    c = lay.crop(uvs)
+    assert c.min() >= 0 and c.max() <= 1 and lay.side >= float(np.ptp(uvs, axis=0).max())
+    assert lay.tex_size == 32 * int(np.ceil(256 * lay.side / 32))

@@ -373,7 +373,8 @@ def mouth_layout(model, track, topo: MeshTopology, uvs: np.ndarray, rows: np.nda
     rows : (m,) int64
         The track rows to lift.
     """
-    sel = _mouth_crop_faces(topo)
+    # a mesh without a mouth gap: the whole layout (the texture is not drawn)
+    sel = _mouth_crop_faces(topo) if topo.mouth_faces.size else np.ones(len(topo.faces), bool)
     box = uvs[np.unique(topo.faces[sel])]
     lo, hi = box.min(axis=0), box.max(axis=0)
     side = float((hi - lo).max())
