@@ -40,6 +40,10 @@ __all__ = [
     "constant_face_texture",
     "merged_face_texture",
     "MOUTH_MAX_FRAMES",
+    "MOUTH_MAX_BYTES",
+    "MouthLayout",
+    "mouth_layout",
+    "mouth_tex_size",
     "MouthFunction",
     "mouth_texture_function",
     "timeline_mouth_function",
@@ -50,6 +54,23 @@ __all__ = [
 #: The mouth texture function lifts at most this many (evenly spaced) frames: float32 textures
 #: of ``T x T`` texels take ``16 T²`` bytes each (120 frames at T = 256: 126 MB).
 MOUTH_MAX_FRAMES = 120
+
+#: ``tex_size="auto"`` (:func:`mouth_layout`): the mouth's texture is made fine enough that one
+#: texel spans at most this many screen pixels of the lifted frames' mouth ...
+MOUTH_TEXEL_PIXELS = 1.0
+#: ... within this side (texels) ...
+MOUTH_MAX_TEX = 1024
+#: ... and these bytes of lifted textures (float16 colour and weight: 8 bytes a texel; the
+#: whole 256² atlas of 120 frames took 126 MB as float32) ...
+MOUTH_MAX_BYTES = 128 * 2 ** 20
+#: ... fewer frames lifted (down to this many) before the side shrinks.
+MOUTH_MIN_FRAMES = 40
+#: Texels per unit of UV the mouth never falls below (the whole atlas at 256², the old size).
+MOUTH_MIN_DENSITY = 256
+#: Rings of triangles around the mouth's that its texture covers (as
+#: :data:`facetransfer.mouth.MOUTH_RING`, whose ring is drawn from it to fit the mouth's gain).
+MOUTH_CROP_RINGS = 3
+_AUTO_BYTES_PER_TEXEL = 8
 
 
 def frame_uvs(vertices: np.ndarray, camera, size: tuple[int, int]) -> np.ndarray:
@@ -240,6 +261,134 @@ class MouthFunction:
         return FaceTexture(self.texture(attributes), self.uvs, -1)
 
 
+@dataclass(frozen=True)
+class MouthLayout:
+    """Where and how finely ``tex_size="auto"`` lifts the mouth's texture (§6).
+
+    The mouth's triangles (and :data:`MOUTH_CROP_RINGS` rings around them) fill a square of the
+    model's UV layout; only that square is lifted, at a side chosen from the size of the
+    mouth in the lifted frames (:func:`mouth_layout`), so a 4K face's lips keep the footage's
+    detail where the whole atlas at 256² spread one texel over ~6 screen pixels.
+
+    Attributes
+    ----------
+    tex_size : int
+        ``T``, the square's side in texels.
+    origin : (2,) tuple of float
+        ``(u, v)`` of the square's lowest corner in the model's UVs.
+    side : float
+        The square's side in UV units.
+    max_frames : int
+        Frames lifted at most (:data:`MOUTH_MAX_BYTES`).
+    pixels_per_uv : float
+        Screen pixels per UV unit of the lifted frames' mouth (median; 0 if unmeasured).
+    """
+
+    tex_size: int
+    origin: tuple
+    side: float
+    max_frames: int
+    pixels_per_uv: float
+
+    @property
+    def texel_pixels(self) -> float:
+        """Screen pixels one texel spans at the mouth (linear)."""
+        return self.pixels_per_uv * self.side / max(self.tex_size - 1, 1)
+
+    def crop(self, uvs: np.ndarray) -> np.ndarray:
+        """``uvs`` (n, 2) in the model's layout as coordinates of the square: (n, 2) float64,
+        the mouth's in [0, 1]."""
+        return (np.asarray(uvs, np.float64) - np.asarray(self.origin, np.float64)) / self.side
+
+
+def mouth_tex_size(texels: float, n_frames: int, *, max_side: int = MOUTH_MAX_TEX,
+                   max_bytes: int = MOUTH_MAX_BYTES, min_frames: int = MOUTH_MIN_FRAMES
+                   ) -> tuple[int, int]:
+    """``(T, frames)``: the side (a multiple of 32, 32..``max_side``) that gives ``texels``
+    across the mouth's square and the frames (<= ``n_frames``) lifted at it, their textures
+    within ``max_bytes`` (8 bytes a texel): fewer frames first (down to ``min_frames``), then a
+    smaller side."""
+    T = int(min(max(32, 32 * np.ceil(texels / 32)), max_side))
+    frames = int(n_frames)
+    per = T * T * _AUTO_BYTES_PER_TEXEL
+    if frames * per > max_bytes:
+        frames = max(int(max_bytes // per), min(int(min_frames), frames))
+        while T > 32 and frames * T * T * _AUTO_BYTES_PER_TEXEL > max_bytes:
+            T -= 32
+    return T, max(frames, 1)
+
+
+def _mouth_crop_faces(topo: MeshTopology, rings: int = MOUTH_CROP_RINGS) -> np.ndarray:
+    """``topo.mouth_faces`` and ``rings`` vertex rings of triangles around them, ``(F',) bool``
+    (a superset of :func:`facetransfer.mouth.mouth_ring_faces`' edge rings)."""
+    sel = np.zeros(len(topo.faces), bool)
+    sel[np.asarray(topo.mouth_faces, np.int64)] = True
+    for _ in range(rings):
+        touched = np.zeros(int(topo.faces.max()) + 1, bool)
+        touched[topo.faces[sel].ravel()] = True
+        sel = touched[topo.faces].any(axis=1)
+    return sel
+
+
+def _tri_area(P: np.ndarray, F: np.ndarray) -> float:
+    """Summed area of triangles ``F`` (m, 3) of 2-D points ``P`` (n, 2)."""
+    a, b, c = P[F[:, 0]], P[F[:, 1]], P[F[:, 2]]
+    return float(0.5 * np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1])
+                              - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])).sum())
+
+
+def _mouth_pixels_per_uv(model, track, topo: MeshTopology, uvs: np.ndarray,
+                         rows: np.ndarray) -> float:
+    """Screen pixels per UV unit of the lips (the mouth's triangles but the closing fan), the
+    median over up to 8 of ``rows``: ``sqrt(screen area / UV area)``; 0 without lips."""
+    fan = np.zeros(len(topo.faces), bool)
+    fan[topo.mouth_fan] = True
+    mf = np.asarray(topo.mouth_faces, np.int64)
+    lips = topo.faces[mf[~fan[mf]]]
+    uv_area = _tri_area(uvs, lips) if lips.size else 0.0
+    if uv_area <= 0:
+        return 0.0
+    scale = [np.sqrt(_tri_area(track.camera(int(r)).project(
+        model.synthesize(track.weights_at(int(r)))), lips) / uv_area)
+        for r in _even_pick(rows, 8)]
+    return float(np.median(scale))
+
+
+def mouth_layout(model, track, topo: MeshTopology, uvs: np.ndarray, rows: np.ndarray,
+                 ) -> MouthLayout:
+    """The :class:`MouthLayout` of ``tex_size="auto"`` for lifting track ``rows`` (§6).
+
+    The square holds the UVs of the mouth's triangles and :data:`MOUTH_CROP_RINGS` rings
+    around them (3 % margin); its side gives one texel per :data:`MOUTH_TEXEL_PIXELS` screen
+    pixels of the frames' mouth (:func:`_mouth_pixels_per_uv`), never coarser than
+    :data:`MOUTH_MIN_DENSITY` texels per UV unit, within :func:`mouth_tex_size`'s bounds.
+
+    Parameters
+    ----------
+    model : MultilinearModel
+    track : Track
+    topo : MeshTopology
+    uvs : (n_closed, 2) float64
+        The closed mesh's UVs (:func:`_closed_uvs`).
+    rows : (m,) int64
+        The track rows to lift.
+    """
+    # a mesh without a mouth gap: the whole layout (the texture is not drawn)
+    sel = _mouth_crop_faces(topo) if topo.mouth_faces.size else np.ones(len(topo.faces), bool)
+    box = uvs[np.unique(topo.faces[sel])]
+    lo, hi = box.min(axis=0), box.max(axis=0)
+    side = float((hi - lo).max())
+    if not side > 0:
+        raise RewriteError(f"the mouth's triangles have no area in the model's UVs "
+                           f"(UV box {lo} - {hi})")
+    margin = 0.03 * side
+    lo, side = lo - margin, side + 2 * margin
+    ppu = _mouth_pixels_per_uv(model, track, topo, uvs, rows)
+    texels = max(ppu / MOUTH_TEXEL_PIXELS, MOUTH_MIN_DENSITY) * side
+    T, frames = mouth_tex_size(texels, len(rows))
+    return MouthLayout(T, (float(lo[0]), float(lo[1])), side, frames, ppu)
+
+
 def _even_pick(rows: np.ndarray, limit: int) -> np.ndarray:
     """At most ``limit`` entries of ``rows``, evenly spaced, first and last kept."""
     if rows.size <= limit:
@@ -248,7 +397,7 @@ def _even_pick(rows: np.ndarray, limit: int) -> np.ndarray:
 
 
 def mouth_texture_function(model, frames, track, topo: MeshTopology | None = None, *,
-                           frame_index: np.ndarray | None = None, tex_size: int = 256,
+                           frame_index: np.ndarray | None = None, tex_size: int | str = 256,
                            step: int = 1, max_frames: int = MOUTH_MAX_FRAMES, k: int = 4,
                            kernel: str = "inverse", bandwidth: float | None = None,
                            progress: Callable[[int], None] | None = None) -> MouthFunction:
@@ -264,6 +413,9 @@ def mouth_texture_function(model, frames, track, topo: MeshTopology | None = Non
     Memory: the lifted textures are float32, ``16 T²`` bytes per frame, so at most
     ``max_frames`` frames (default :data:`MOUTH_MAX_FRAMES` = 120, about 126 MB at T = 256) are
     lifted, evenly spaced over the usable ones (every ``step``-th, face not lost).
+    ``tex_size="auto"`` lifts only the mouth's square of the UV layout (:func:`mouth_layout`)
+    at a side that follows the face's size in the frames (a texel per screen pixel, up to
+    :data:`MOUTH_MAX_TEX`), as float16 (8 bytes a texel), within :data:`MOUTH_MAX_BYTES`.
 
     Parameters
     ----------
@@ -277,8 +429,9 @@ def mouth_texture_function(model, frames, track, topo: MeshTopology | None = Non
         Default :func:`mesh_topology` of the model.
     frame_index : (track.n_frames,) int, optional
         Default ``arange``: row i of the track is frame i. Repeated frames are lifted once.
-    tex_size : int
-        ``T``, the texture's width and height in texels.
+    tex_size : int or "auto"
+        ``T``, the texture's width and height in texels (the whole UV layout); ``"auto"``:
+        the mouth's square at the face's size (:class:`MouthLayout`).
     step : int
         Use every ``step``-th track row.
     max_frames : int
@@ -306,15 +459,33 @@ def mouth_texture_function(model, frames, track, topo: MeshTopology | None = Non
         raise RewriteError("mouth='function' needs a model with an expression or viseme mode")
     topo = mesh_topology(model) if topo is None else topo
     uvs = _closed_uvs(model, topo)
-    for name, val in (("step", step), ("max_frames", max_frames), ("tex_size", tex_size)):
+    if isinstance(tex_size, str) and tex_size != "auto":
+        raise RewriteError(f"tex_size must be an integer >= 1 or 'auto', got {tex_size!r}")
+    for name, val in (("step", step), ("max_frames", max_frames)) + (
+            () if tex_size == "auto" else (("tex_size", tex_size),)):
         if int(val) != val or val < 1:
             raise RewriteError(f"{name} must be an integer >= 1, got {val!r}")
     idx, rows = _mouth_rows(track, len(frames), frame_index, int(step), int(max_frames))
+    rows, uvs, T, dtype = _lift_layout(model, track, topo, uvs, rows, tex_size)
     textures, weights, attrs = _lift_mouth_textures(model, frames, track, topo, uvs, idx, rows,
-                                                    int(tex_size), progress)
-    log.info("mouth texture function: %d frames lifted at %dx%d", rows.size, tex_size, tex_size)
+                                                    T, progress, dtype)
+    log.info("mouth texture function: %d frames lifted at %dx%d", rows.size, T, T)
     fn = TextureFunction(textures, weights, attrs, k=k, kernel=kernel, bandwidth=bandwidth)
     return MouthFunction(fn, uvs, idx[rows])
+
+
+def _lift_layout(model, track, topo: MeshTopology, uvs: np.ndarray, rows: np.ndarray,
+                 tex_size: int | str) -> tuple[np.ndarray, np.ndarray, int, type]:
+    """``(rows, uvs, T, dtype)`` :func:`mouth_texture_function` lifts: as given at
+    ``tex_size`` in float32, or for ``"auto"`` the :func:`mouth_layout`'s frames, square
+    (its UVs) and side in float16."""
+    if tex_size != "auto":
+        return rows, uvs, int(tex_size), np.float32
+    layout = mouth_layout(model, track, topo, uvs, rows)
+    T = layout.tex_size
+    log.info("mouth texture: the mouth's UV square at %dx%d, %.2f screen pixels a texel "
+             "(%.0f pixels per UV unit)", T, T, layout.texel_pixels, layout.pixels_per_uv)
+    return _even_pick(rows, layout.max_frames), layout.crop(uvs), T, np.float16
 
 
 def timeline_mouth_function(model, frames, track, index: np.ndarray, n: int,
@@ -351,8 +522,9 @@ def _mouth_rows(track, n_frames: int, frame_index, step: int, max_frames: int
 
 
 def _lift_mouth_textures(model, frames, track, topo: MeshTopology, uvs: np.ndarray,
-                         idx: np.ndarray, rows: np.ndarray, tex_size: int, progress):
-    """The UV textures (m, T, T, 3) float32, their texel weights (m, T, T) float32 and the
+                         idx: np.ndarray, rows: np.ndarray, tex_size: int, progress,
+                         dtype=np.float32):
+    """The UV textures (m, T, T, 3), their texel weights (m, T, T), both of ``dtype``, and the
     attribute vectors (m, r) of the closed meshes of track ``rows`` (frames ``idx[rows]``)."""
 
     from ..io.ahead import ordered_ahead
@@ -361,8 +533,8 @@ def _lift_mouth_textures(model, frames, track, topo: MeshTopology, uvs: np.ndarr
     atlas = uv_atlas(faces, uvs, tex_size)
     # texels of the mouth-closing fan (its triangles come after the model's)
     gap = atlas.texel_tri >= int(np.asarray(model.faces).shape[0])
-    textures = np.empty((rows.size, tex_size, tex_size, 3), np.float32)
-    weights = np.empty((rows.size, tex_size, tex_size), np.float32)
+    textures = np.empty((rows.size, tex_size, tex_size, 3), dtype)
+    weights = np.empty((rows.size, tex_size, tex_size), dtype)
     attrs = np.empty((rows.size, len(attribute_vector(model, track.weights_at(int(rows[0]))))))
 
     def lift(j: int, r: int) -> None:                 # frame j's texture, weights, attributes
@@ -370,10 +542,10 @@ def _lift_mouth_textures(model, frames, track, topo: MeshTopology, uvs: np.ndarr
         V = close_mouth(model.synthesize(w), topo)  # Eq. (5), mouth closed
         frame = np.asarray(frames[int(idx[r])])
         cam = track.camera(r)
-        lifted = lift_uv_texture(frame, V, faces, uvs, cam, tex_size, atlas=atlas)
-        textures[j], weights[j] = lifted.texture, lifted.weight
+        tex, wt = lift_uv_texture(frame, V, faces, uvs, cam, tex_size, atlas=atlas)
         if gap.any():
-            _fill_closed_gap(textures[j], weights[j], frame, V, cam, atlas, gap)
+            _fill_closed_gap(tex, wt, frame, V, cam, atlas, gap)
+        textures[j], weights[j] = tex, wt
         attrs[j] = attribute_vector(model, w)
 
     # two frames at a time: NumPy's gathers and the raster kernel release the GIL

@@ -36,9 +36,10 @@ class TextureFunction:
     Parameters
     ----------
     textures : (F, ..., 3) float
-        Lifted textures (images (F, T, T, 3) or per-vertex colours (F, n, 3)), 0..255.
+        Lifted textures (images (F, T, T, 3) or per-vertex colours (F, n, 3)), 0..255; kept
+        as float16 if given so (half the memory), else as float32.
     weights : (F, ...) float
-        Their confidences (Eq. (L1)).
+        Their confidences (Eq. (L1)); float16 kept likewise.
     attributes : (F, r) float
         Attribute vector of every frame.
     k : int
@@ -57,7 +58,8 @@ class TextureFunction:
     Notes
     -----
     All lifted textures are held in memory as float32: ``F * T * T * 16`` bytes (200 frames at
-    T = 256 take 210 MB); lift every few frames or use a smaller ``T`` for long clips.
+    T = 256 take 210 MB), as float16 ``F * T * T * 8``; lift every few frames or use a smaller
+    ``T`` for long clips. Eq. (T1) is evaluated in float64 whatever the storage.
 
     References
     ----------
@@ -66,8 +68,7 @@ class TextureFunction:
 
     def __init__(self, textures, weights, attributes, *, k: int = 4, kernel: str = "gaussian",
                  bandwidth: float | None = None, prior: float = 1e-6, faces=None):
-        C = np.asarray(textures, dtype=np.float32)
-        Wt = np.asarray(weights, dtype=np.float32)
+        C, Wt = _stored(textures), _stored(weights)
         A = np.asarray(attributes, dtype=np.float64)
         if A.ndim != 2 or A.shape[0] == 0 or A.shape[1] == 0:
             raise ShapeError(f"attributes must be (F, r) with F, r > 0, got {A.shape}")
@@ -167,6 +168,12 @@ class TextureFunction:
             if isinstance(exc, FaceTransferError):
                 raise
             raise TextureError(f"cannot read texture function {path}: {exc}") from None
+
+
+def _stored(a) -> np.ndarray:
+    """``a`` as float16 if it is so, else as float32 (the storage of :class:`TextureFunction`)."""
+    a = np.asarray(a)
+    return a if a.dtype == np.float16 else a.astype(np.float32, copy=False)
 
 
 def _median_nn_distance(A: np.ndarray) -> float:
