@@ -202,5 +202,19 @@ def test_usd_has_the_glbs_teeth_on_the_head_and_the_jaw_shapes(case, tmp_path):
     for name, target in zip(names, lower.GetBlendShapeTargetsRel().GetTargets()):
         offsets = np.array(UsdSkel.BlendShape(stage.GetPrimAtPath(target)).GetOffsetsAttr().Get())
         np.testing.assert_allclose(offsets, moves[name][0], atol=1e-5)
-    anim = UsdSkel.Animation(stage.GetPrimAtPath("/Face/Skel/Anim"))
-    assert set(names) <= set(anim.GetBlendShapesAttr().Get())
+    # UsdSkel's own evaluation: the SkelAnimation's weights of frame 3 taken by name
+    cache = UsdSkel.Cache()
+    cache.Populate(UsdSkel.Root(stage.GetPrimAtPath("/Face")), Usd.PrimDefaultPredicate)
+    prim = stage.GetPrimAtPath("/Face/teethLower")
+    anim = cache.GetSkelQuery(UsdSkel.Skeleton(stage.GetPrimAtPath("/Face/Skel"))).GetAnimQuery()
+    w = cache.GetSkinningQuery(prim).GetBlendShapeMapper().Remap(
+        anim.ComputeBlendShapeWeights(Usd.TimeCode(3)))
+    query = UsdSkel.BlendShapeQuery(UsdSkel.BindingAPI(prim))
+    sub, idx, subidx = query.ComputeSubShapeWeights(w)
+    pts = UsdGeom.Mesh(prim).GetPointsAttr().Get()
+    query.ComputeDeformedPoints(sub, idx, subidx, query.ComputeBlendShapePointIndices(),
+                                query.ComputeSubShapePointOffsets(), pts)
+    want = teeth.lower.points + sum(float(a[3, ARKIT_NAMES.index(n)]) * moves[n][0]
+                                    for n in JAW_SHAPES)
+    np.testing.assert_allclose(np.array(pts), want, atol=1e-4)
+    assert np.abs(want - teeth.lower.points).max() > 0.1
