@@ -35,8 +35,8 @@ LOWER_SHOW = 0.1
 LOWER_SHADE = 0.7
 #: Where the teeth part, eye widths from the middle: the central incisors (8.5 mm), the
 #: lateral ones (6.5 mm), the canines (7.5 mm) and the first premolars (7 mm), these two seen on
-#: a turned head's near side (:func:`facetransfer.mouth_inside._seen_as`); the line's half-width (eye widths) and how
-#: much it darkens.
+#: a turned head's near side (:func:`facetransfer.mouth_inside._seen_as`); the line's
+#: half-width (eye widths) and how much it darkens.
 TEETH_PARTS = (0.0, 0.32, 0.56, 0.84, 1.1)
 PART_WIDTH = 0.012
 PART_SHADE = 0.15
@@ -78,8 +78,9 @@ class DentalArch:
 def dental_arch(V: np.ndarray, topo: MeshTopology, eyes: np.ndarray) -> DentalArch:
     """The dental arches of the face ``V`` (n, 3) (one frame's mesh, the head's frame), from its
     inner-lip loop (``topo.mouth_loop``) and its eye corners ``eyes`` (4,) (iBUG 36, 39, 42,
-    45): the arches a rewrite draws the teeth on (:func:`facetransfer.mouth_inside._inside_colours`) and the exported
-    teeth stand on (:mod:`facetransfer.export.teeth`)."""
+    45): the arches a rewrite draws the teeth on
+    (:func:`facetransfer.mouth_inside._inside_colours`) and the exported teeth stand on
+    (:mod:`facetransfer.export.teeth`)."""
     loop = V[topo.mouth_loop, 0]
     E = V[eyes]
     eye = 0.5 * (np.linalg.norm(E[0] - E[1]) + np.linalg.norm(E[2] - E[3]))

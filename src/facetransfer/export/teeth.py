@@ -33,8 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["JAW_SHAPES", "ROOT", "REACH", "TeethRow", "Teeth", "rigid_fit", "row_moves", "chin_vertices",
-           "teeth_of", "gltf_primitives"]
+__all__ = ["JAW_SHAPES", "ROOT", "REACH", "SET_BACK", "TeethRow", "Teeth", "rigid_fit",
+           "row_moves", "chin_vertices", "teeth_of", "gltf_primitives"]
 
 #: The shapes that move the lower teeth (the jaw's); any other leaves them where they are.
 JAW_SHAPES = ("jawOpen", "jawLeft", "jawRight", "jawForward")
