@@ -213,9 +213,10 @@ def teeth_of(model, neutral: np.ndarray, deltas, names=None) -> Teeth | None:
 
 def gltf_primitives(gltf, blob, model, V: np.ndarray, deltas: list) -> list:
     """The teeth as two primitives of the glb's face mesh (none without a mouth gap), after
-    its mouth's inside: the upper row with its 52 morph targets all zeros (stored as
-    accessors without data), the lower with the jaw shapes' rigid motions (``POSITION`` and
-    ``NORMAL``); ``COLOR_0`` and a white material, both sides shown.
+    its mouth's inside: the upper row with its 52 morph targets all zeros, the lower with the
+    jaw shapes' rigid motions (``POSITION`` and ``NORMAL``) and zeros for the other shapes (a
+    row's zero targets share one pair of accessors without data); ``COLOR_0`` and a white
+    material, both sides shown.
 
     Parameters
     ----------
@@ -240,9 +241,13 @@ def gltf_primitives(gltf, blob, model, V: np.ndarray, deltas: list) -> list:
                                        metallicFactor=0.0, roughnessFactor=0.4)))
     prims = []
     for row, fits in ((teeth.upper, {}), (teeth.lower, teeth.fits)):
+        zero = np.zeros(row.points.shape, np.float32)          # one pair for every still shape
+        still = Attributes(POSITION=blob.morph_accessor(zero, bounds=True),
+                           NORMAL=blob.morph_accessor(zero))
         targets = [Attributes(POSITION=blob.morph_accessor(D.astype(np.float32), bounds=True),
                               NORMAL=blob.morph_accessor(Nd.astype(np.float32)))
-                   for D, Nd in row_moves(row, fits, ARKIT_NAMES)]
+                   if name in fits else still
+                   for name, (D, Nd) in zip(ARKIT_NAMES, row_moves(row, fits, ARKIT_NAMES))]
         attrs = Attributes(POSITION=blob.accessor(row.points.astype(np.float32), "VEC3",
                                                   bounds=True),
                            NORMAL=blob.accessor(row.normals.astype(np.float32), "VEC3"),
