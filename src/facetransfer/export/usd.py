@@ -230,8 +230,10 @@ def _teeth(stage, skel, rig, model, pxr) -> None:
 
     Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = pxr
     teeth = teeth_of(model, rig.neutral, list(rig.deltas))
-    for name, row, fits in (("teethUpper", teeth.upper, {}), ("teethLower", teeth.lower,
-                                                              teeth.fits)) if teeth else ():
+    if teeth is None:                                   # no landmarks or no mouth gap
+        return
+    for name, row, fits in (("teethUpper", teeth.upper, {}),
+                            ("teethLower", teeth.lower, teeth.fits)):
         mesh = _tri_mesh(stage, f"/Face/{name}", row.points, row.tris, pxr)
         mesh.CreateDoubleSidedAttr(True)
         mesh.CreateDisplayColorPrimvar(UsdGeom.Tokens.vertex).Set(
