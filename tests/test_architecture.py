@@ -187,6 +187,7 @@ LAYER_OF = {
     "facetransfer.topology": "base",
     "facetransfer.arkit": "base",
     "facetransfer.palette": "base",      # the colours of the eyeballs and the mouth's inside
+    "facetransfer.dental": "base",       # the dental arches: the rewrite's drawn and the exported teeth
     "facetransfer.assets": "base",
     "facetransfer.default_model": "base",
     "facetransfer.model_hint": "base",   # a refusal's way to the model a file was made with

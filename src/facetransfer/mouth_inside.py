@@ -29,10 +29,11 @@ Here, decided by measurement:
    half its lips' darkest tone's hue and half the palette's, darker toward the back (the
    fan's centre, :data:`facetransfer.palette.CAVITY_BACK`); the tongue, a dome over the lower
    lip in the lips' colour darkened (:data:`TONGUE_SHARE`, :data:`TONGUE_LEVEL`); the lower
-   teeth over it (:data:`LOWER_SHOW`, :data:`LOWER_SHARE`) and the upper teeth under the upper
-   lip (:data:`facetransfer.palette.TEETH_SHOW` eye widths, at most :data:`UPPER_SHARE` of the
-   opening), over the middle of the mouth's width, drawn on the dental arch behind the lips
-   seen along the camera's view in the head's frame (:data:`ARCH_CURVE`: a turned head's far
+   teeth over it (:data:`facetransfer.dental.LOWER_SHOW`, :data:`LOWER_SHARE`) and the upper
+   teeth under the upper lip (:data:`facetransfer.palette.TEETH_SHOW` eye widths, at most
+   :data:`UPPER_SHARE` of the opening), over the middle of the mouth's width, drawn on the
+   dental arch behind the lips (:func:`facetransfer.dental.dental_arch`) seen along the
+   camera's view in the head's frame (:data:`facetransfer.dental.ARCH_CURVE`: a turned head's far
    teeth foreshortened, hidden past the far lip's corner), in the palette's teeth colour at
    :data:`TEETH_LEVEL` of the target's skin (one gain: lit like the target's face), darker
    toward the mouth's corners, in the upper lip's shadow and on the lower teeth, parted at the
@@ -54,6 +55,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .dental import ARCH_CURVE, LOWER_SHADE, LOWER_SHOW, dental_arch, teeth_shade
 from .mouth import mouth_ring_faces
 from .palette import CAVITY_BACK, PALETTE, TEETH_SHOW, TEETH_SPAN
 from .region_weights import smoothstep
@@ -86,8 +88,6 @@ MEASURED_FRAMES = 120
 #: :data:`LOWER_SHARE`: the cavity shows between them.
 UPPER_SHARE = 0.45
 LOWER_SHARE = 0.25
-#: How far the lower teeth show over the lower lip, in eye widths (about 2.7 mm).
-LOWER_SHOW = 0.1
 #: The teeth's luminance over the target's skin's (the median around its mouth), measured
 #: where real teeth show: the brightest twentieth of the opening (MediaPipe's inner lips in
 #: the clips' frames opened over a quarter of their width, where that twentieth is over 1.6
@@ -99,30 +99,12 @@ LOWER_SHOW = 0.1
 #: the skin shows. (mouth54's 1.25, the palette's teeth over its skin, 1.21, a little more,
 #: drew them under every source whose upper teeth show lit.)
 TEETH_LEVEL = 1.35
-#: The lower teeth, in the lower lip's shadow, at this fraction of the upper teeth's light.
-LOWER_SHADE = 0.7
-#: Where the teeth part, eye widths from the middle: the central incisors (8.5 mm), the
-#: lateral ones (6.5 mm), the canines (7.5 mm) and the first premolars (7 mm), these two seen on
-#: a turned head's near side (:func:`_seen_as`); the line's half-width (eye widths) and how
-#: much it darkens.
-TEETH_PARTS = (0.0, 0.32, 0.56, 0.84, 1.1)
-PART_WIDTH = 0.012
-PART_SHADE = 0.15
 #: The tongue: a dome over the lower lip rising to this share of the opening's height in the
 #: middle, over this fraction of the mouth's half-width, in the lips' colour at
 #: :data:`TONGUE_LEVEL` of their luminance (darker toward the mouth's corners).
 TONGUE_SHARE = 0.35
 TONGUE_SPAN = 0.75
 TONGUE_LEVEL = 0.6
-#: The dental arch the teeth are drawn on, seen through the opening along the camera's view in
-#: the head's frame: a parabola ``z = front - ARCH_CURVE x²`` (eye widths) about the mouth's
-#: middle, its front :data:`ARCH_BEHIND` eye widths behind the upper (the lower) lip's inner
-#: edge at the middle. The canines, 17 mm from the middle, lie 9 mm behind the incisors (an
-#: adult's upper arch; an eye width 26.9 mm): 0.33 / 0.64² = 0.81. A head turned away shows
-#: the near side's teeth and hides the far side's behind the far lip's corner; a frontal head
-#: sees each point of the arch straight behind the opening's point, as the flat band did.
-ARCH_CURVE = 0.81
-ARCH_BEHIND = 0.05
 #: The lips' inner edge: the drawn inside fades in over this fraction of the mouth's width
 #: (in pixels, at least one).
 EDGE_FEATHER = 0.06
@@ -432,21 +414,6 @@ def _arch_hits(X: np.ndarray, ray: np.ndarray, middle: float, front: float, eye:
     return eye * (P[:, 0] + t * d[0]), eye * (P[:, 1] + t * d[1]), seen
 
 
-def _arch_fronts(V: np.ndarray, topo: MeshTopology, middle: float, half: float
-                 ) -> tuple[float, float]:
-    """``(upper, lower)``: the z of the upper and the lower lips' inner edges (the closed mesh
-    ``V``'s inner-lip loop above and below its mean height) at their foremost over the middle
-    third of the mouth (``middle`` its x, ``half`` its half-width): the dental arches' fronts
-    lie :data:`ARCH_BEHIND` eye widths behind them. Either is the loop's foremost point where
-    the middle holds none of its points."""
-    loop = V[topo.mouth_loop]
-    mid = np.abs(loop[:, 0] - middle) < max(half / 3.0, 1e-12)
-    centre = float(loop[:, 1].mean())
-    upper, lower = loop[mid & (loop[:, 1] >= centre), 2], loop[mid & (loop[:, 1] < centre), 2]
-    z = float(loop[:, 2].max())
-    return (float(upper.max()) if upper.size else z), (float(lower.max()) if lower.size else z)
-
-
 def _inside_colours(X: np.ndarray, back: np.ndarray, V: np.ndarray, topo: MeshTopology,
                     inside: DrawnInside, px: float, ray: np.ndarray) -> np.ndarray:
     """``(n, 3)`` float64: the colour of the inside at the fan's points ``X`` (n, 3) (the head's
@@ -455,11 +422,8 @@ def _inside_colours(X: np.ndarray, back: np.ndarray, V: np.ndarray, topo: MeshTo
     arch seen along ``ray`` (3,), the camera's view into the head (:func:`_arch_hits`); ``px``
     model units a pixel (the parts' edges are soft over one)."""
     colour = inside.cavity[None, :] * (1.0 - (1.0 - CAVITY_BACK) * back)[:, None]
-    loop = V[topo.mouth_loop, 0]
-    E = V[inside.eyes]
-    eye = 0.5 * (np.linalg.norm(E[0] - E[1]) + np.linalg.norm(E[2] - E[3]))
-    half = 0.5 * (loop.max() - loop.min())
-    middle = 0.5 * (loop.min() + loop.max())
+    arch = dental_arch(V, topo, inside.eyes)
+    eye, half, middle = arch.eye, arch.half, arch.middle
     x, y = X[:, 0] - middle, X[:, 1]
     edges = _visible_edges(X, px)
     up, low = edges(X[:, 0])
@@ -472,16 +436,15 @@ def _inside_colours(X: np.ndarray, back: np.ndarray, V: np.ndarray, topo: MeshTo
     over(inside.tongue[None, :] * (1.0 - 0.4 * u)[:, None],
          np.clip((top - y) / px + 0.5, 0.0, 1.0) * (u < 1.0))
     span = TEETH_SPAN * half
-    fronts = _arch_fronts(V, topo, middle, half)
-    for lower, front in ((True, fronts[1]), (False, fronts[0])):
-        xa, ya, seen = _arch_hits(X, ray, middle, front - ARCH_BEHIND * eye, eye)
+    for lower, front in ((True, arch.lower), (False, arch.upper)):
+        xa, ya, seen = _arch_hits(X, ray, middle, front, eye)
         if not seen.any():
             continue
         # the lips' edges where they cover the arch (a nod moves them over it, not the teeth)
         at_up, at_low = _visible_edges(np.column_stack([xa, ya])[seen], px)(xa)
         gap = np.maximum(at_up - at_low, 0.0)
         reach = _seen_as(xa, ray, eye)
-        teeth = _teeth(inside.teeth, xa, span, eye)
+        teeth = teeth_shade(inside.teeth, xa, span, eye)
         if lower:
             edge = at_low + np.minimum(LOWER_SHOW * eye, LOWER_SHARE * gap)
             a = np.clip((edge - ya) / px + 0.5, 0.0, 1.0)
@@ -510,15 +473,3 @@ def _seen_as(x: np.ndarray, ray: np.ndarray, eye: float) -> np.ndarray:
     with np.errstate(divide="ignore"):
         slope = np.sqrt(np.maximum(1.0 / np.maximum(facing, 0.0) ** 2 - 1.0, 0.0))
     return np.minimum(np.abs(x), eye * slope / (2.0 * ARCH_CURVE))
-
-
-def _teeth(colour: np.ndarray, x: np.ndarray, span: float, eye: float) -> np.ndarray:
-    """``(n, 3)``: the teeth's ``colour`` (3,) at the arch's points ``x`` (n,) from the mouth's
-    middle: darker toward the mouth's corners (``span`` the teeth's half-width), parted at
-    the incisors (:data:`TEETH_PARTS`, eye widths ``eye``)."""
-    side = np.clip(1.0 - np.abs(x) / span, 0.0, 1.0)
-    light = 0.45 + 0.55 * (1.0 - (1.0 - side) ** 2)                      # the corners' dark
-    parts = eye * np.asarray(TEETH_PARTS)       # eye widths (before: taken as model units)
-    parted = 1.0 - PART_SHADE * np.exp(-((np.abs(x)[:, None] - parts) ** 2).min(axis=1)
-                                       / (PART_WIDTH * eye) ** 2)
-    return colour[None, :] * (light * parted)[:, None]

@@ -13,7 +13,8 @@ json        mpjson        per-frame scores in MediaPipe Face Landmarker's layout
 ==========  ============  ===========================================================
 
 The glb's eyeballs, behind the face's eye holes and turned by its gaze, are
-:mod:`facetransfer.export.gltf_eyes`. What every format shares (the model check, the activations, the head pose) is
+:mod:`facetransfer.export.gltf_eyes`; the glb's and the USD's teeth, on the dental arches behind
+the lips (the lower row moved by the jaw), :mod:`facetransfer.export.teeth`. What every format shares (the model check, the activations, the head pose) is
 :mod:`facetransfer.export.common`. The browser dial editor is
 :mod:`facetransfer.export.viewer`; a neutral pose for the curves (Live Link Face's calibration)
 is :mod:`facetransfer.export.neutral`.

@@ -15,7 +15,9 @@ shared ``eyeball`` mesh) turned by the gaze of :func:`.gltf_eyes.track_eye_gaze`
 recorded eye angles, else the eyeLook* curves), a ``rotation`` channel each (not for a
 model without landmarks), and the mouth's inside, a second primitive of the face mesh with its
 own morph targets (:func:`_mouth_inside`): the lips' gap no longer shows what is behind the
-head. Positions are in
+head; then the upper and the lower teeth, two more primitives on the dental arches behind the
+lips (:func:`.teeth.gltf_primitives`: the upper row rigid, the lower moved by the jaw shapes'
+targets), so an open jaw shows teeth. Positions are in
 metres (glTF's unit): model units times ``metres_per_unit`` (0.01 for the ICT-FaceKit's
 centimetres).
 
@@ -299,7 +301,11 @@ def _mesh(gltf, blob: _Blob, rig, model, unit: float, material: int) -> None:
     idx = faces.astype(np.uint32).reshape(-1, 1)
     prim = Primitive(attributes=attrs, indices=blob.accessor(idx, "SCALAR", target=_ELEMENTS),
                      material=material, targets=targets)
-    prims = [prim] + _mouth_inside(gltf, blob, model, V, [(d * unit) for d in rig.deltas])
+    from .teeth import gltf_primitives
+
+    moved = [(d * unit) for d in rig.deltas]
+    prims = [prim] + _mouth_inside(gltf, blob, model, V, moved) + gltf_primitives(
+        gltf, blob, model, V, moved)             # the teeth: after the mouth's inside
     gltf.meshes.append(Mesh(name="face", primitives=prims, weights=[0.0] * len(rig.deltas),
                             extras={"targetNames": list(ARKIT_NAMES)}))
 

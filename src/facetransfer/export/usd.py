@@ -17,6 +17,9 @@ Layout (``usd-core``, the optional extra ``facetransfer[usd]``)::
       /Face/eyeLeft       likewise on "head/eyeLeft" (no eyes for a model without landmarks)
       /Face/mouthInside   Mesh, the mouth's inside (:func:`.gltf.mouth_cone`) on "head", with
                           its own 52 BlendShape prims (the lips' deltas)
+      /Face/teethUpper    Mesh, the upper teeth (:mod:`.teeth`, displayColor) on "head", rigid
+      /Face/teethLower    Mesh, the lower teeth on "head", with a BlendShape prim per jaw shape
+                          (jawOpen, jawLeft, jawRight, jawForward: the jaw's rigid motion)
 
 Time codes are frame numbers (``timeCodesPerSecond`` = the clip's fps): from 0, or, for a
 track of an image sequence numbered from N (a VFX plate's 1001), from N, so that the
@@ -79,11 +82,12 @@ def _mesh(stage, rig, model, pxr):
     return mesh
 
 
-def _blend_shapes(stage, mesh, deltas, pxr):
-    """A ``BlendShape`` prim under ``mesh`` per ARKit name, of ``deltas`` (52 of ``(n, 3)``)."""
+def _blend_shapes(stage, mesh, deltas, pxr, names=ARKIT_NAMES):
+    """A ``BlendShape`` prim under ``mesh`` per name of ``names`` (the ARKit names), of
+    ``deltas`` (one ``(n, 3)`` each)."""
     Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = pxr
     paths = []
-    for name, d in zip(ARKIT_NAMES, deltas):
+    for name, d in zip(names, deltas):
         bs = UsdSkel.BlendShape.Define(stage, mesh.GetPath().AppendChild(name))
         idx = np.flatnonzero(np.any(d != 0, axis=1)).astype(np.int32)
         if idx.size == 0:  # a shape the model lacks (tongueOut): one zero offset
@@ -180,10 +184,11 @@ def _animation(stage, track, activations, pxr, first: int = 0, eyes=None):
     return anim
 
 
-def _bind(stage, skel, mesh, pxr, joint: int = 0, deltas=None) -> None:
+def _bind(stage, skel, mesh, pxr, joint: int = 0, deltas=None, names=ARKIT_NAMES) -> None:
     """Bind ``mesh`` rigidly to the skeleton's joint ``joint`` (its points in the head's frame:
-    a geometry bind transform of identity), with the 52 ARKit blend shapes of ``deltas``
-    ``(52, V, 3)`` where given."""
+    a geometry bind transform of identity), with the blend shapes ``names`` (the 52 ARKit
+    names; the SkelAnimation's weights are taken by name) of ``deltas`` ``(len(names), V, 3)``
+    where given."""
     Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = pxr
     binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
     binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
@@ -191,8 +196,9 @@ def _bind(stage, skel, mesh, pxr, joint: int = 0, deltas=None) -> None:
     binding.CreateJointWeightsPrimvar(True, 1).Set(Vt.FloatArray([1.0]))
     binding.CreateGeomBindTransformAttr(Gf.Matrix4d(1))
     if deltas is not None:
-        binding.CreateBlendShapesAttr(list(ARKIT_NAMES))
-        binding.CreateBlendShapeTargetsRel().SetTargets(_blend_shapes(stage, mesh, deltas, pxr))
+        binding.CreateBlendShapesAttr(list(names))
+        binding.CreateBlendShapeTargetsRel().SetTargets(_blend_shapes(stage, mesh, deltas, pxr,
+                                                                      names))
 
 
 def _mouth_inside(stage, skel, rig, model, pxr) -> None:
@@ -214,6 +220,26 @@ def _mouth_inside(stage, skel, rig, model, pxr) -> None:
     mesh.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(
         Vt.Vec3fArray([Gf.Vec3f(*map(float, lin))]))
     _bind(stage, skel, mesh, pxr, 0, deltas)
+
+
+def _teeth(stage, skel, rig, model, pxr) -> None:
+    """The glb's teeth (:mod:`facetransfer.export.teeth`), vertex ``displayColor``, both sides
+    shown, on "head": ``/Face/teethUpper`` rigid, ``/Face/teethLower`` with a blend shape per
+    jaw shape (:data:`facetransfer.export.teeth.JAW_SHAPES`: the jaw's rigid motion)."""
+    from .teeth import row_moves, teeth_of
+
+    Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = pxr
+    teeth = teeth_of(model, rig.neutral, list(rig.deltas))
+    if teeth is None:                                   # no landmarks or no mouth gap
+        return
+    for name, row, fits in (("teethUpper", teeth.upper, {}),
+                            ("teethLower", teeth.lower, teeth.fits)):
+        mesh = _tri_mesh(stage, f"/Face/{name}", row.points, row.tris, pxr)
+        mesh.CreateDoubleSidedAttr(True)
+        mesh.CreateDisplayColorPrimvar(UsdGeom.Tokens.vertex).Set(
+            Vt.Vec3fArray.FromNumpy(row.colours))
+        _bind(stage, skel, mesh, pxr, 0, [d for d, _ in row_moves(row, fits, fits)] or None,
+              list(fits))
 
 
 def _joints(eyes) -> list[str]:
@@ -276,6 +302,7 @@ def write_usd(track, model, out: str | os.PathLike, *, overwrite: bool = False,
     if eyes is not None:
         _eyeballs(stage, skel, eyes, pxr)
     _mouth_inside(stage, skel, rig, model, pxr)
+    _teeth(stage, skel, rig, model, pxr)
     meta = {"source": source_name(track.source), "generator": "facetransfer"}
     stage.GetRootLayer().customLayerData = meta if timecode is None else \
         {**meta, "timecode": str(timecode)}
