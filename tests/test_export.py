@@ -210,7 +210,7 @@ def test_glb_mouth_opens_onto_its_inside_not_what_is_behind_the_head(case, tmp_p
     model, track, a, _ = case
     out = export_track(track, "glb", tmp_path / "face.glb", model=model)
     g = GLTF2().load(str(out))
-    skin, inside = g.meshes[0].primitives[:2]        # the face mesh: skin, mouth's inside (then the eye sockets)
+    skin, inside = g.meshes[0].primitives[:2]   # the face mesh: skin, mouth's inside, ...
     F = _read_accessor(g, skin.indices).reshape(-1, 3)
     fan = _read_accessor(g, inside.indices).reshape(-1, 3)
     k = len(fan)
@@ -324,6 +324,69 @@ def test_glb_eyes_hide_while_their_lids_are_shut(blinks, tmp_path):
         assert np.all(keys[shut[:, e], 0] < 1e-3 * radius)                   # shut: hidden
     issues = _validate(out)  # last: skips when node or the validator is absent
     assert issues["numErrors"] == 0 and issues["numWarnings"] == 0, issues["messages"]
+
+
+#: three.js (npm ``three``, the vendored build's version) plays a glb in Node: the eye nodes'
+#: scale, as its AnimationMixer sets it, at each of ``times`` (s).
+EYE_SCALES_JS = r"""
+import { readFileSync } from 'node:fs';
+import { pathToFileURL } from 'node:url';
+const args = JSON.parse(process.argv[2]);
+const THREE = await import(pathToFileURL(args.three + '/build/three.module.js').href);
+const { GLTFLoader } = await import(
+  pathToFileURL(args.three + '/examples/jsm/loaders/GLTFLoader.js').href);
+const b = readFileSync(args.glb);
+const gltf = await new GLTFLoader().parseAsync(
+  b.buffer.slice(b.byteOffset, b.byteOffset + b.length), '');
+const mixer = new THREE.AnimationMixer(gltf.scene);
+const action = mixer.clipAction(gltf.animations[0]);
+action.setLoop(THREE.LoopOnce, 1);
+action.clampWhenFinished = true;
+action.play();
+const out = [];
+for (const t of args.times) {
+  mixer.setTime(t);
+  out.push(['eyeRight', 'eyeLeft'].map((n) => gltf.scene.getObjectByName(n).scale.toArray()));
+}
+process.stdout.write(JSON.stringify(out));
+"""
+
+
+def test_three_hides_the_shut_eyes_for_the_whole_frame(blinks, tmp_path):
+    """A real player's reading of the eyes' ``scale`` channels (three.js's GLTFLoader and
+    AnimationMixer in Node): at a frame's time each eye has the file's key for that frame, the
+    radius or nearly 0, and half-way to the next frame still that key (STEP: a LINEAR channel
+    would show a half-size eyeball, a strip of white, while the lids open or close)."""
+    from pygltflib import GLTF2
+
+    from facetransfer.export.viewer import THREE_VERSION
+
+    node, three = shutil.which("node"), TOOLS / "node_modules" / "three"
+    if node is None or not (three / "package.json").is_file() or json.loads(
+            (three / "package.json").read_text())["version"] != THREE_VERSION:
+        pytest.skip(f"node or the npm package three {THREE_VERSION} (in {TOOLS}) is not there")
+    model, track, b = blinks
+    out = export_track(track, "glb", tmp_path / "face.glb", model=model)
+    g = GLTF2().load(str(out))
+    anim = g.animations[0]
+    keys = np.stack([_read_accessor(g, anim.samplers[c.sampler].output)[:, 0] for n in (1, 2)
+                     for c in anim.channels if (c.target.node, c.target.path) == (n, "scale")], 1)
+    radius = np.array([g.nodes[n].scale[0] for n in (1, 2)])
+    frames = [0, 1, 2, 3]
+    times = [t / track.fps for k in frames for t in (k + 1e-3, k + 0.5)]
+    script = tmp_path / "eyes.mjs"
+    script.write_text(EYE_SCALES_JS)
+    res = subprocess.run([node, str(script), json.dumps({"three": str(three), "glb": str(out),
+                                                          "times": times})],
+                         capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr[-3000:]
+    shown = np.array(json.loads(res.stdout))[:, :, 0].reshape(len(frames), 2, 2)  # [k, t, eye]
+    np.testing.assert_allclose(shown[:, 0], keys[frames], rtol=1e-6)   # at the frame's time
+    np.testing.assert_allclose(shown[:, 1], keys[frames], rtol=1e-6)   # and half-way on
+    np.testing.assert_allclose(shown[0, 0], radius, rtol=1e-6)        # rest: the radius
+    assert np.all(shown[1] < 1e-3 * radius)                            # shut: hidden
+    assert shown[2, 0, 0] == pytest.approx(radius[0], rel=1e-6)        # the left eye alone
+    assert shown[2, 0, 1] < 1e-3 * radius[1]                           # shut
 
 
 def test_glb_eye_sockets_close_the_eye_holes_and_follow_the_lids(blinks, tmp_path):

@@ -13,17 +13,18 @@ Rx(-pitch)`` of :func:`facetransfer.track.gaze.activation_gaze`'s angles (yaw to
 subject's left, +x; pitch up, +y), so +z, the pupil, points along
 :func:`facetransfer.track.gaze.gaze_direction`; a Live Link Face take's by its recorded eye
 angles where it has them, as the puppet and the ``view`` page turn them
-(:func:`track_eye_gaze`). The lids (the face's morph targets) close over
-them, but not quite: the default model's shut lids leave a slit of about 0.2 cm, through which
-0.34-0.37 cm² of each eyeball showed from the front (BENCHMARKS.md, fifty-fifth session, helpers
-review55b and eyelid55). So, as the ``view`` page does (a closed lid hides the eye, a dark
-socket behind), each eye hole is closed behind by a dark cone (:func:`socket_cones`, in
-:func:`socket_colour`), and each eyeball is hidden while its lids are shut (:func:`eyes_shown`:
-the page's lid gap under :data:`facetransfer.puppet_face.LID_SHADE`'s lower end), a ``scale``
-key a frame (STEP) of the radius or :data:`SHUT_SCALE` of it: the slit of shut lids shows the
-socket, a dark line. Nodes ``eyeRight`` and ``eyeLeft``: the subject's own, as ARKit names them. The USD
-export (:mod:`facetransfer.export.usd`) has the same eyeballs, bound to joints of those names
-below its ``head``.
+(:func:`track_eye_gaze`). The lids (the face's morph targets) close over them, but not
+quite: the default model's shut lids leave a slit of about 0.2 cm, through which 0.34-0.37 cm²
+of each eyeball showed from the front (BENCHMARKS.md, fifty-fifth session, helpers review55b
+and eyelid55). So, as the ``view`` page does (a closed lid hides the eye, a dark socket
+behind), each eye hole is closed behind by a dark cone (:func:`socket_cones`, in
+:func:`socket_colour`), and each eyeball is hidden while its lids are shut
+(:func:`eyes_shown`: the page's lid gap at or under the lower end of
+:data:`facetransfer.puppet_face.LID_SHADE`), a ``scale`` key a frame (STEP) of the radius or
+:data:`SHUT_SCALE` of it: the slit of shut lids shows the socket, a dark line. Nodes
+``eyeRight`` and ``eyeLeft``: the subject's own, as ARKit names them. The USD export
+(:mod:`facetransfer.export.usd`) has the same eyeballs, bound to joints of those names below its
+``head`` (their scale in its SkelAnimation), and the same sockets.
 """
 
 from __future__ import annotations
