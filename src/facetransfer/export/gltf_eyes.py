@@ -90,7 +90,7 @@ def eyes_shown(model, rig, activations: np.ndarray) -> np.ndarray:
     :func:`facetransfer.puppet_face.lid_light` of the frame's iBUG-68 landmark vertices above
     0, i.e. a lid gap (the mean of :data:`facetransfer.puppet_face.LID_PAIRS`' distances over
     the eye's corner distance) above ``LID_SHADE[0]`` (0.08; the default model's lids stop
-    0.066 apart at eyeBlink 1). All shown for a model without landmarks."""
+    0.066-0.075 apart at eyeBlink 1). All shown for a model without landmarks."""
     from ..puppet_face import lid_light
 
     a = np.asarray(activations, np.float64)
