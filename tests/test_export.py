@@ -210,7 +210,7 @@ def test_glb_mouth_opens_onto_its_inside_not_what_is_behind_the_head(case, tmp_p
     model, track, a, _ = case
     out = export_track(track, "glb", tmp_path / "face.glb", model=model)
     g = GLTF2().load(str(out))
-    skin, inside = g.meshes[0].primitives[:2]        # the face mesh: skin, mouth's inside (teeth next)
+    skin, inside = g.meshes[0].primitives[:2]   # the face mesh: skin, mouth's inside, ...
     F = _read_accessor(g, skin.indices).reshape(-1, 3)
     fan = _read_accessor(g, inside.indices).reshape(-1, 3)
     k = len(fan)
@@ -230,6 +230,202 @@ def test_glb_mouth_opens_onto_its_inside_not_what_is_behind_the_head(case, tmp_p
         assert all(edges.get(frozenset((int(rim[i]), int(rim[(i + 1) % k])))) == 1
                    for i in range(k))                 # in order along the mesh's boundary
         assert cone[k, 2] < cone[:k, 2].min()         # the point behind the lips
+
+
+#: iBUG-68 eye corners (outer, inner) and lid pairs (upper, lower) of the subject's right eye,
+#: then the left: the `view` page's lid gap (viewer.html's placeEyes), which hides an eyeball at
+#: and below 0.08 eye widths (puppet_face.LID_SHADE[0]; the default model's eyeBlink 1: 0.066).
+EYE_CORNERS, LID_PAIRS_68, SHUT_GAP = ((36, 39), (45, 42)), (((37, 41), (38, 40)),
+                                                            ((43, 47), (44, 46))), 0.08
+
+
+@pytest.fixture(scope="module")
+def blinks(arkit_model, make_arkit_track):
+    """A track of the test model's identity 0 (whose lids at eyeBlink 1 close to 0.05 eye widths:
+    identity 1's stop at 0.098, open by the page's rule) whose frames are: rest, both eyes shut
+    (eyeBlink 1), the left eye alone shut, both half shut, shut and looking down, then random."""
+    import dataclasses
+
+    track, a, _ = make_arkit_track(arkit_model, n_frames=10, identity=0)
+    b = np.array(a, np.float32)
+    col = {n: ARKIT_NAMES.index(n) for n in ARKIT_NAMES}
+    b[:5, :] = 0.0
+    b[1, [col["eyeBlinkLeft"], col["eyeBlinkRight"]]] = 1.0
+    b[2, col["eyeBlinkLeft"]] = 1.0
+    b[3, [col["eyeBlinkLeft"], col["eyeBlinkRight"]]] = 0.5
+    b[4, [col["eyeBlinkLeft"], col["eyeBlinkRight"], col["eyeLookDownLeft"],
+          col["eyeLookDownRight"]]] = 1.0
+    return arkit_model, dataclasses.replace(track, blendshapes=b), b
+
+
+def _lid_gaps(model, face: np.ndarray) -> np.ndarray:
+    """The page's lid gap ``(2,)`` (right, left eye) of a posed face ``(n, 3)``."""
+    P = face[np.asarray(model.landmarks)]
+    return np.array([np.mean([np.linalg.norm(P[u] - P[lo]) for u, lo in pairs])
+                     / np.linalg.norm(P[o] - P[i]) for (o, i), pairs in
+                     zip(EYE_CORNERS, LID_PAIRS_68)])
+
+
+def _boundary_edges(F: np.ndarray) -> set:
+    """The edges of triangles ``F`` (m, 3) that one triangle alone has (the mesh's holes)."""
+    count = {}
+    for tri in F:
+        for u, v in ((tri[0], tri[1]), (tri[1], tri[2]), (tri[2], tri[0])):
+            e = frozenset((int(u), int(v)))
+            count[e] = count.get(e, 0) + 1
+    return {e for e, c in count.items() if c == 1}
+
+
+def _cones_on_the_holes(face: np.ndarray, cone: np.ndarray, fan: np.ndarray, holes: set,
+                        tol: float) -> list:
+    """Check that each cone of ``fan`` (triangles (next rim vertex, rim vertex, apex)) has its
+    rim on ``face``'s vertices (to ``tol``), in order along the holes' edges ``holes``, and its
+    apex behind the rim; return each cone's rim as face vertex ids."""
+    rims = []
+    for apex in sorted(set(fan[:, 2].tolist())):
+        tris = fan[fan[:, 2] == apex]
+        d = np.linalg.norm(face[None] - cone[tris[:, :2].ravel(), None], axis=2)
+        assert d.min(axis=1).max() < tol                 # each rim vertex is a face vertex
+        ids = d.argmin(axis=1).reshape(-1, 2)
+        assert all(frozenset(map(int, e)) in holes for e in ids)     # along a hole, in order
+        assert cone[apex, 2] < cone[tris[:, 1], 2].min()  # the apex behind the lids
+        rims.append(ids[:, 1])
+    return rims
+
+
+def test_glb_eyes_hide_while_their_lids_are_shut(blinks, tmp_path):
+    """review55b: at eyeBlink 1 the lids leave a slit and sink into the eyeballs, so 0.34-0.37
+    cm² of white eyeball showed along the shut lids in every blink a player played. Now, as the
+    `view` page does, each eye node has a ``scale`` channel (STEP, a key a frame): its radius
+    while the frame's lid gap on the file's own face (the page's rule) is above 0.08 eye widths,
+    nearly 0 at or below it. The node's static scale stays the radius."""
+    from pygltflib import GLTF2
+
+    model, track, b = blinks
+    out = export_track(track, "glb", tmp_path / "face.glb", model=model)
+    g = GLTF2().load(str(out))
+    prim = g.meshes[0].primitives[0]
+    rest = _read_accessor(g, prim.attributes.POSITION).astype(np.float64)
+    D = np.stack([_read_accessor(g, t["POSITION"]) for t in prim.targets]).astype(np.float64)
+    anim = g.animations[0]
+    ch = {(c.target.node, c.target.path): anim.samplers[c.sampler] for c in anim.channels}
+    W = _read_accessor(g, ch[0, "weights"].output).reshape(len(b), 52).astype(np.float64)
+    gaps = np.array([_lid_gaps(model, rest + np.tensordot(w, D, 1)) for w in W])
+    shut = gaps <= SHUT_GAP
+    assert shut[1].all() and not shut[0].any() and list(shut[2]) == [False, True]
+    assert not shut[3].any()
+    for e, node in enumerate((1, 2)):
+        sampler = ch[node, "scale"]
+        assert sampler.interpolation == "STEP" and sampler.input == ch[0, "weights"].input
+        keys = _read_accessor(g, sampler.output).astype(np.float64)
+        radius = g.nodes[node].scale[0]
+        assert keys.shape == (len(b), 3) and np.all(keys == keys[:, :1])   # uniform
+        np.testing.assert_allclose(keys[~shut[:, e], 0], radius, rtol=1e-6)   # shown: the radius
+        assert np.all(keys[shut[:, e], 0] < 1e-3 * radius)                   # shut: hidden
+    issues = _validate(out)  # last: skips when node or the validator is absent
+    assert issues["numErrors"] == 0 and issues["numWarnings"] == 0, issues["messages"]
+
+
+#: three.js (npm ``three``, the vendored build's version) plays a glb in Node: the eye nodes'
+#: scale, as its AnimationMixer sets it, at each of ``times`` (s).
+EYE_SCALES_JS = r"""
+import { readFileSync } from 'node:fs';
+import { pathToFileURL } from 'node:url';
+const args = JSON.parse(process.argv[2]);
+const THREE = await import(pathToFileURL(args.three + '/build/three.module.js').href);
+const { GLTFLoader } = await import(
+  pathToFileURL(args.three + '/examples/jsm/loaders/GLTFLoader.js').href);
+const b = readFileSync(args.glb);
+const gltf = await new GLTFLoader().parseAsync(
+  b.buffer.slice(b.byteOffset, b.byteOffset + b.length), '');
+const mixer = new THREE.AnimationMixer(gltf.scene);
+const action = mixer.clipAction(gltf.animations[0]);
+action.setLoop(THREE.LoopOnce, 1);
+action.clampWhenFinished = true;
+action.play();
+const out = [];
+for (const t of args.times) {
+  mixer.setTime(t);
+  out.push(['eyeRight', 'eyeLeft'].map((n) => gltf.scene.getObjectByName(n).scale.toArray()));
+}
+process.stdout.write(JSON.stringify(out));
+"""
+
+
+def test_three_hides_the_shut_eyes_for_the_whole_frame(blinks, tmp_path):
+    """A real player's reading of the eyes' ``scale`` channels (three.js's GLTFLoader and
+    AnimationMixer in Node): at a frame's time each eye has the file's key for that frame, the
+    radius or nearly 0, and half-way to the next frame still that key (STEP: a LINEAR channel
+    would show a half-size eyeball, a strip of white, while the lids open or close)."""
+    from pygltflib import GLTF2
+
+    from facetransfer.export.viewer import THREE_VERSION
+
+    node, three = shutil.which("node"), TOOLS / "node_modules" / "three"
+    if node is None or not (three / "package.json").is_file() or json.loads(
+            (three / "package.json").read_text())["version"] != THREE_VERSION:
+        pytest.skip(f"node or the npm package three {THREE_VERSION} (in {TOOLS}) is not there")
+    model, track, b = blinks
+    out = export_track(track, "glb", tmp_path / "face.glb", model=model)
+    g = GLTF2().load(str(out))
+    anim = g.animations[0]
+    keys = np.stack([_read_accessor(g, anim.samplers[c.sampler].output)[:, 0] for n in (1, 2)
+                     for c in anim.channels if (c.target.node, c.target.path) == (n, "scale")], 1)
+    radius = np.array([g.nodes[n].scale[0] for n in (1, 2)])
+    frames = [0, 1, 2, 3]
+    times = [t / track.fps for k in frames for t in (k + 1e-3, k + 0.5)]
+    script = tmp_path / "eyes.mjs"
+    script.write_text(EYE_SCALES_JS)
+    res = subprocess.run([node, str(script), json.dumps({"three": str(three), "glb": str(out),
+                                                          "times": times})],
+                         capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr[-3000:]
+    shown = np.array(json.loads(res.stdout))[:, :, 0].reshape(len(frames), 2, 2)  # [k, t, eye]
+    np.testing.assert_allclose(shown[:, 0], keys[frames], rtol=1e-6)   # at the frame's time
+    np.testing.assert_allclose(shown[:, 1], keys[frames], rtol=1e-6)   # and half-way on
+    np.testing.assert_allclose(shown[0, 0], radius, rtol=1e-6)        # rest: the radius
+    assert np.all(shown[1] < 1e-3 * radius)                            # shut: hidden
+    assert shown[2, 0, 0] == pytest.approx(radius[0], rel=1e-6)        # the left eye alone
+    assert shown[2, 0, 1] < 1e-3 * radius[1]                           # shut
+
+
+def test_glb_eye_sockets_close_the_eye_holes_and_follow_the_lids(blinks, tmp_path):
+    """Behind the eye holes a player showed the background (at the open eye's corners) or,
+    once the eyeball is hidden, through the slit of shut lids. Now the face mesh has an
+    ``eyeSocket`` primitive, the `view` page's socket: a cone per eye hole to a point behind it,
+    in the page's ``cavity_back`` (the mouth's cavity colour times CAVITY_BACK), whose morph
+    targets are the lids' own: at rest and at shut eyes its rims are the holes' boundaries."""
+    from pygltflib import GLTF2
+
+    from facetransfer.io.exr import srgb_decode
+    from facetransfer.palette import CAVITY_BACK, PALETTE
+
+    model, track, b = blinks
+    g = GLTF2().load(str(export_track(track, "glb", tmp_path / "face.glb", model=model)))
+    skin, *insides = g.meshes[0].primitives
+    sockets = [p for p in insides if g.materials[p.material].name == "eyeSocket"]
+    assert len(sockets) == 1
+    sock = sockets[0]
+    mat = g.materials[sock.material]
+    want = srgb_decode(np.round(np.array(PALETTE["cavity"]) * CAVITY_BACK).astype(np.uint8))
+    np.testing.assert_allclose(mat.pbrMetallicRoughness.baseColorFactor, list(want) + [1.0],
+                               atol=1e-7)
+    assert mat.doubleSided and len(sock.targets) == 52
+    holes = _boundary_edges(_read_accessor(g, skin.indices).reshape(-1, 3))
+    fan = _read_accessor(g, sock.indices).reshape(-1, 3).astype(np.int64)
+    assert len(set(fan[:, 2].tolist())) == 2                 # two cones: two apexes
+    rims = []
+    for w in (np.zeros(52), b[1].astype(np.float64), b[7].astype(np.float64)):   # rest, shut
+        face = _read_accessor(g, skin.attributes.POSITION).astype(np.float64) + np.tensordot(
+            w, np.stack([_read_accessor(g, t["POSITION"]) for t in skin.targets]), 1)
+        cone = _read_accessor(g, sock.attributes.POSITION).astype(np.float64) + np.tensordot(
+            w, np.stack([_read_accessor(g, t["POSITION"]) for t in sock.targets]), 1)
+        rims.append(_cones_on_the_holes(face, cone, fan, holes, 1e-7))
+        eyes = np.array([g.nodes[k].translation for k in (1, 2)])
+        for rim in rims[-1]:     # each rim a whole eye hole, about one eye
+            assert len(set(rim.tolist())) == len(rim) > 8
+            assert np.linalg.norm(eyes - face[rim].mean(axis=0), axis=1).min() < 0.01   # m
+    assert all(np.array_equal(r, s) for r, s in zip(rims[0], rims[1]))   # the same loops
 
 
 def test_glb_morph_targets_and_animation(case, tmp_path):
@@ -391,6 +587,69 @@ def test_usd_mouth_inside_follows_the_lips(case, tmp_path):
         assert all(edges.get(frozenset((int(rim[i]), int(rim[(i + 1) % k])))) == 1
                    for i in range(k))
         assert C[k, 2] < C[:k, 2].min()
+
+
+def test_usd_eye_sockets_follow_the_lids_and_shut_eyes_are_hidden(blinks, tmp_path):
+    """The USD as the glb: a mesh ``/Face/eyeSockets`` on the head joint, whose 52 blend shapes
+    move its rims with the lids (at rest and with the eyes shut each rim is an eye hole's
+    boundary, in order), in the page's ``cavity_back``; and each eye joint's scale in the
+    SkelAnimation nearly 0 at a frame whose lids are shut by the page's rule, 1 where they are
+    open: skinned by UsdSkel itself, a shut eye's points all lie at its centre."""
+    pytest.importorskip("pxr", reason="usd-core is not installed (extra [usd])")
+    from pxr import Usd, UsdGeom, UsdSkel
+
+    from facetransfer.io.exr import srgb_decode
+    from facetransfer.palette import CAVITY_BACK, PALETTE
+
+    def posed(prim, w):
+        pts = np.array(UsdGeom.Mesh(prim).GetPointsAttr().Get(), np.float64)
+        for name, x in zip(ARKIT_NAMES, w):
+            bs = UsdSkel.BlendShape(prim.GetChild(name))
+            idx = bs.GetPointIndicesAttr().Get()
+            pts[np.arange(len(pts)) if idx is None else np.array(idx)] += x * np.array(
+                bs.GetOffsetsAttr().Get(), np.float64)
+        return pts
+
+    model, track, b = blinks
+    stage = Usd.Stage.Open(str(export_track(track, "usd", tmp_path / "f.usda", model=model)))
+    face, sock = stage.GetPrimAtPath("/Face/Mesh"), stage.GetPrimAtPath("/Face/eyeSockets")
+    assert sock.IsValid() and [str(t) for t in UsdSkel.BindingAPI(sock).GetSkeletonRel()
+                               .GetTargets()] == ["/Face/Skel"]
+    want = srgb_decode(np.round(np.array(PALETTE["cavity"]) * CAVITY_BACK).astype(np.uint8))
+    np.testing.assert_allclose(UsdGeom.Mesh(sock).GetDisplayColorAttr().Get()[0], want,
+                               atol=1e-7)
+    holes = _boundary_edges(np.array(UsdGeom.Mesh(face).GetFaceVertexIndicesAttr().Get())
+                            .reshape(-1, 3))
+    fan = np.array(UsdGeom.Mesh(sock).GetFaceVertexIndicesAttr().Get()).reshape(-1, 3)
+    for w in (np.zeros(52), b[1].astype(np.float64)):
+        V = posed(face, w)
+        assert len(_cones_on_the_holes(V, posed(sock, w), fan, holes, 1e-4)) == 2   # cm
+    anim = UsdSkel.Animation(stage.GetPrimAtPath("/Face/Skel/Anim"))
+    cache = UsdSkel.Cache()
+    cache.Populate(UsdSkel.Root(stage.GetPrimAtPath("/Face")), Usd.PrimDefaultPredicate)
+    skq = cache.GetSkelQuery(UsdSkel.Skeleton(stage.GetPrimAtPath("/Face/Skel")))
+    for k in range(len(b)):
+        shut = _lid_gaps(model, posed(face, b[k].astype(np.float64))) <= SHUT_GAP
+        scales = np.array(anim.GetScalesAttr().Get(Usd.TimeCode(k)), np.float64)
+        assert np.all(scales[0] == 1.0) and np.all(scales[1:][~shut] == 1.0)
+        assert np.all(scales[1:][shut] < 1e-3)
+        assert k > 3 or tuple(shut) == [(False, False), (True, True), (False, True),
+                                       (False, False)][k]    # rest, shut, left shut, half
+        xf = skq.ComputeSkinningTransforms(Usd.TimeCode(k))
+        for j, side in enumerate(("Right", "Left")):
+            prim = stage.GetPrimAtPath(f"/Face/eye{side}")
+            pts = UsdGeom.Mesh(prim).GetPointsAttr().Get()
+            assert cache.GetSkinningQuery(prim).ComputeSkinnedPoints(xf, pts, Usd.TimeCode(k))
+            P = np.array(pts, np.float64)
+            spread = np.linalg.norm(P - P.mean(axis=0), axis=1).max()   # cm
+            assert (spread < 1e-2) if shut[j] else (spread > 0.5)
+    try:  # USD's own validators (usd-core >= 24.11) on the new prims too
+        from pxr import UsdValidation
+    except ImportError:
+        return
+    errors = UsdValidation.ValidationContext(
+        UsdValidation.ValidationRegistry().GetOrLoadAllValidators()).Validate(stage)
+    assert not errors, [e.GetMessage() for e in errors]
 
 
 def test_usd_posed_extents_are_each_frames_box(case):

@@ -70,7 +70,7 @@ def test_glb_has_upper_and_lower_teeth_whose_lower_row_follows_the_jaw(case, tmp
     out = export_track(track, "glb", tmp_path / "face.glb", model=model)
     g = GLTF2().load(str(out))
     prims = g.meshes[0].primitives
-    assert len(prims) == 4
+    assert len(prims) == 5 and g.materials[prims[4].material].name == "eyeSocket"  # then sockets
     upper, lower = prims[2], prims[3]
     assert g.materials[upper.material].name == "teeth" and g.materials[upper.material].doubleSided
     face = _read_accessor(g, prims[0].attributes.POSITION).astype(np.float64)

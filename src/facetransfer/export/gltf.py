@@ -12,14 +12,16 @@ one key per frame (time ``k / fps``, LINEAR) whose values are the track's activa
 head pose as the node's ``rotation`` and ``translation`` channels (same keys). Behind the
 face's eye holes, two eyeball nodes (``eyeRight``, ``eyeLeft``: children of ``face``, one
 shared ``eyeball`` mesh) turned by the gaze of :func:`.gltf_eyes.track_eye_gaze` (a take's
-recorded eye angles, else the eyeLook* curves), a ``rotation`` channel each (not for a
-model without landmarks), and the mouth's inside, a second primitive of the face mesh with its
-own morph targets (:func:`_mouth_inside`): the lips' gap no longer shows what is behind the
-head; then the upper and the lower teeth, two more primitives on the dental arches behind the
-lips (:func:`.teeth.gltf_primitives`: the upper row rigid, the lower moved by the jaw shapes'
-targets), so an open jaw shows teeth. Positions are in
-metres (glTF's unit): model units times ``metres_per_unit`` (0.01 for the ICT-FaceKit's
-centimetres).
+recorded eye angles, else the eyeLook* curves), a ``rotation`` channel each, and hidden while
+their lids are shut, a ``scale`` channel each (STEP: the radius, or nearly 0; not for a model
+without landmarks); the mouth's inside, a second primitive of the face mesh with its own morph
+targets (:func:`_mouth_inside`): the lips' gap no longer shows what is behind the head; then
+the upper and the lower teeth, two more primitives on the dental arches behind the lips
+(:func:`.teeth.gltf_primitives`: the upper row rigid, the lower moved by the jaw shapes'
+targets), so an open jaw shows teeth; and last the eye sockets, a dark cone behind each eye
+hole, one more primitive (:func:`_eyes`): the slit the shut lids leave shows them, not the
+eyeball. Positions are in metres (glTF's unit): model units times ``metres_per_unit`` (0.01
+for the ICT-FaceKit's centimetres).
 
 Each target's ``POSITION`` and ``NORMAL`` accessor is stored the smallest exact way
 (:func:`morph_encoding`): as an accessor without data when every delta is zero (read as
@@ -311,51 +313,41 @@ def _mesh(gltf, blob: _Blob, rig, model, unit: float, material: int) -> None:
 
 
 def mouth_cone(model, neutral: np.ndarray, deltas: list):
-    """The mouth's inside as the `view` page closes it: a cone from the inner lips' loop
+    """The mouth's inside as the `view` page closes it
+    (:func:`facetransfer.export.viewer.loop_cones`): a cone from the inner lips' loop
     (:func:`facetransfer.topology.mesh_topology`) to a point behind its middle by
-    :data:`facetransfer.export.viewer.CAVITY_DEPTH` of its width.
-
-    Returns
-    -------
-    tuple or None
-        ``(points (k+1, 3) float32, fan (k, 3) int64, [deltas (k+1, 3) float32 per shape])``:
-        the loop's points and the point behind, the triangles (facing out of the face), and
-        per shape of ``deltas`` (each ``(n, 3)``, the face's) the loop's own deltas and their
-        mean for the point; None without a mouth gap.
-    """
+    :data:`facetransfer.export.viewer.CAVITY_DEPTH` of its width; ``(points (k+1, 3), fan (k,
+    3), [deltas (k+1, 3) per shape])``, None without a mouth gap."""
     from ..topology import mesh_topology
-    from .viewer import CAVITY_DEPTH
+    from .viewer import CAVITY_DEPTH, loop_cones
 
     loop = mesh_topology(model).mouth_loop
-    if loop.size == 0:
-        return None
-    rim = np.asarray(neutral, np.float64)[loop]
-    apex = rim.mean(axis=0) - [0.0, 0.0, CAVITY_DEPTH["mouth"] * np.ptp(rim[:, 0])]
-    k = len(loop)
-    fan = np.stack([np.roll(np.arange(k), -1), np.arange(k), np.full(k, k)], axis=1)
-    moved = [np.concatenate([d[loop], d[loop].mean(axis=0)[None]]).astype(np.float32)
-             for d in deltas]
-    return np.concatenate([rim, apex[None]]).astype(np.float32), fan, moved
+    return loop_cones(neutral, deltas, [(loop, CAVITY_DEPTH["mouth"])]) if loop.size else None
 
 
 def _mouth_inside(gltf, blob: _Blob, model, V: np.ndarray, deltas: list) -> list:
-    """The mouth's inside, a second primitive of the face mesh (none without a mouth gap): a
-    cone from the inner lips' loop (:func:`facetransfer.topology.mesh_topology`) to a point
-    behind its middle by :data:`facetransfer.export.viewer.CAVITY_DEPTH` of its width, as the
-    `view` page closes it, in the page's cavity colour, both sides shown. Its morph targets are
-    the loop's own deltas and their mean for the point, so an open jaw opens onto it (before,
-    a player showed what was behind the head there)."""
+    """The mouth's inside, a second primitive of the face mesh (:func:`mouth_cone`, none
+    without a mouth gap; :func:`_inside`), in the `view` page's cavity colour."""
+    from ..palette import PALETTE
+
+    return _inside(gltf, blob, mouth_cone(model, V, deltas), "mouth", PALETTE["cavity"])
+
+
+def _inside(gltf, blob: _Blob, cone, name: str, colour) -> list:
+    """A cavity's inside (``cone`` of :func:`facetransfer.export.viewer.loop_cones`, none where
+    it is None), a primitive of the face mesh with its own morph targets (the holes' deltas),
+    in the sRGB ``colour``, both sides shown: the mouth's (an open jaw opens onto it; before, a
+    player showed what was behind the head there) and the eye sockets'
+    (:func:`.gltf_eyes.socket_cones`: the slit of shut lids shows them)."""
     from pygltflib import Attributes, Material, PbrMetallicRoughness, Primitive
 
     from ..io.exr import srgb_decode
-    from ..palette import PALETTE
 
-    cone = mouth_cone(model, V, deltas)
     if cone is None:
         return []
     P, fan, cone_deltas = cone
-    lin = srgb_decode(np.asarray(PALETTE["cavity"], np.uint8))
-    gltf.materials.append(Material(name="mouth", doubleSided=True,
+    lin = srgb_decode(np.asarray(colour, np.uint8))
+    gltf.materials.append(Material(name=name, doubleSided=True,
                                    pbrMetallicRoughness=PbrMetallicRoughness(
                                        baseColorFactor=[float(c) for c in lin] + [1.0],
                                        metallicFactor=0.0, roughnessFactor=1.0)))
@@ -368,11 +360,14 @@ def _mouth_inside(gltf, blob: _Blob, model, V: np.ndarray, deltas: list) -> list
 
 def _eyes(gltf, blob: _Blob, model, rig, unit: float) -> list[int]:
     """The eyeball nodes (:mod:`facetransfer.export.gltf_eyes`), children of node 0, and
-    their mesh and material; their indices, none for a model without landmarks."""
+    their mesh and material; their indices, none for a model without landmarks. And the eye
+    sockets (:func:`.gltf_eyes.socket_cones`), a primitive of the face mesh (:func:`_inside`)."""
     from pygltflib import Attributes, Material, Mesh, Node, PbrMetallicRoughness, Primitive
 
-    from .gltf_eyes import EYE_NODES, eye_placement, eyeball_mesh
+    from .gltf_eyes import EYE_NODES, eye_placement, eyeball_mesh, socket_colour, socket_cones
 
+    sockets = socket_cones(model, (rig.neutral * unit).astype(np.float32), rig.deltas * unit)
+    gltf.meshes[0].primitives += _inside(gltf, blob, sockets, "eyeSocket", socket_colour())
     placed = eye_placement(model, rig.neutral)
     if placed is None:
         return []
@@ -395,10 +390,13 @@ def _eyes(gltf, blob: _Blob, model, rig, unit: float) -> list[int]:
 
 
 def _animation(gltf, blob: _Blob, track, activations: np.ndarray, unit: float,
-               eyes: list[int]) -> None:
+               eyes: list[int], shown: np.ndarray | None = None) -> None:
+    """The animation ``performance``: the face's weights and pose, LINEAR, and each eye's turn
+    (LINEAR) and, with ``shown`` ``(F, 2)`` (:func:`.gltf_eyes.eyes_shown`), its ``scale``
+    (STEP): the node's radius while shown, :data:`.gltf_eyes.SHUT_SCALE` of it while shut."""
     from pygltflib import Animation, AnimationChannel, AnimationChannelTarget, AnimationSampler
 
-    from .gltf_eyes import eye_rotations, track_eye_gaze
+    from .gltf_eyes import eye_rotations, eye_scales, track_eye_gaze
 
     t = (np.arange(track.n_frames) / track.fps).astype(np.float32).reshape(-1, 1)
     inp = blob.accessor(t, "SCALAR", target=None, bounds=True)
@@ -409,10 +407,15 @@ def _animation(gltf, blob: _Blob, track, activations: np.ndarray, unit: float,
         q = eye_rotations(activations, track_eye_gaze(track, activations)).astype(np.float32)
         outs += [(node, "rotation", np.ascontiguousarray(q[:, k]), "VEC4")
                  for k, node in enumerate(eyes)]
+    if eyes and shown is not None:
+        sc = eye_scales(shown, [gltf.nodes[node].scale[0] for node in eyes]).astype(np.float32)
+        outs += [(node, "scale", np.repeat(sc[:, k, None], 3, axis=1), "VEC3")
+                 for k, node in enumerate(eyes)]
     anim = Animation(name="performance")
     for i, (node, path, a, kind) in enumerate(outs):
         anim.samplers.append(AnimationSampler(input=inp, output=blob.accessor(a, kind, target=None),
-                                              interpolation="LINEAR"))
+                                              interpolation="STEP" if path == "scale"
+                                              else "LINEAR"))
         anim.channels.append(AnimationChannel(sampler=i,
                                               target=AnimationChannelTarget(node=node, path=path)))
     gltf.animations.append(anim)
@@ -437,6 +440,8 @@ def write_glb(track, model, out: str | os.PathLike, *, overwrite: bool = False, 
     """
     from pygltflib import GLTF2, Asset, Buffer, Node, Scene
 
+    from .gltf_eyes import eyes_shown
+
     a = require_activations(track)
     rig = identity_rig(track, model)
     gltf = GLTF2(asset=Asset(version="2.0", generator="facetransfer"))
@@ -450,7 +455,8 @@ def write_glb(track, model, out: str | os.PathLike, *, overwrite: bool = False, 
     gltf.nodes[0].children = eyes
     gltf.scenes.append(Scene(name="facetransfer", nodes=[0]))
     gltf.scene = 0
-    _animation(gltf, blob, track, a, float(metres_per_unit), eyes)
+    _animation(gltf, blob, track, a, float(metres_per_unit), eyes,
+               eyes_shown(model, rig, a) if eyes else None)
     pad = (-blob.buf.tell()) % 4
     blob.buf.write(b"\0" * pad)
     data = blob.buf.getvalue()

@@ -13,22 +13,32 @@ Rx(-pitch)`` of :func:`facetransfer.track.gaze.activation_gaze`'s angles (yaw to
 subject's left, +x; pitch up, +y), so +z, the pupil, points along
 :func:`facetransfer.track.gaze.gaze_direction`; a Live Link Face take's by its recorded eye
 angles where it has them, as the puppet and the ``view`` page turn them
-(:func:`track_eye_gaze`). The lids (the face's morph targets) close over
-them, but for a strip: the default model's shut lids leave a gap of about 0.2 cm, through which
-0.34-0.37 cm² of each eyeball shows from the front (BENCHMARKS.md, fifty-fifth session, helpers
-review55b and eyelid55). Nodes ``eyeRight`` and ``eyeLeft``: the subject's own, as ARKit names them. The USD
-export (:mod:`facetransfer.export.usd`) has the same eyeballs, bound to joints of those names
-below its ``head``.
+(:func:`track_eye_gaze`). The lids (the face's morph targets) close over them, but not
+quite: the default model's shut lids leave a slit of about 0.2 cm, through which 0.34-0.37 cm²
+of each eyeball showed from the front (BENCHMARKS.md, fifty-fifth session, helpers review55b
+and eyelid55). So, as the ``view`` page does (a closed lid hides the eye, a dark socket
+behind), each eye hole is closed behind by a dark cone (:func:`socket_cones`, in
+:func:`socket_colour`), and each eyeball is hidden while its lids are shut
+(:func:`eyes_shown`: the page's lid gap at or under the lower end of
+:data:`facetransfer.puppet_face.LID_SHADE`), a ``scale`` key a frame (STEP) of the radius or
+:data:`SHUT_SCALE` of it: the slit of shut lids shows the socket, a dark line. Nodes
+``eyeRight`` and ``eyeLeft``: the subject's own, as ARKit names them. The USD export
+(:mod:`facetransfer.export.usd`) has the same eyeballs, bound to joints of those names below its
+``head`` (their scale in its SkelAnimation), and the same sockets.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["EYE_NODES", "eye_placement", "eye_rotations", "eyeball_mesh", "track_eye_gaze"]
+__all__ = ["EYE_NODES", "SHUT_SCALE", "eye_placement", "eye_rotations", "eyeball_mesh",
+           "track_eye_gaze", "eyes_shown", "eye_scales", "socket_cones", "socket_colour"]
 
 #: The eye nodes' names, in :data:`facetransfer.track.gaze.EYES` order.
 EYE_NODES = ("eyeRight", "eyeLeft")
+#: An eyeball's scale while its lids are shut, a share of its radius: a point at its centre,
+#: behind the socket (not 0, which leaves a player's normal matrix singular).
+SHUT_SCALE = 1e-4
 #: Rings of the sphere between its poles and vertices about each ring.
 _RINGS, _AROUND = 24, 32
 
@@ -71,6 +81,60 @@ def track_eye_gaze(track, activations: np.ndarray) -> np.ndarray:
 
     recorded = track_gaze(track)
     return activation_gaze(activations) if recorded is None else recorded
+
+
+def eyes_shown(model, rig, activations: np.ndarray) -> np.ndarray:
+    """Whether each eyeball is drawn, ``(F, 2) bool`` (:data:`EYE_NODES` order), per frame of
+    ``activations`` ``(F, 52)`` on the exported face (``rig``: its neutral and the 52 deltas, as
+    a player adds them): the ``view`` page's and the puppet's rule,
+    :func:`facetransfer.puppet_face.lid_light` of the frame's iBUG-68 landmark vertices above
+    0, i.e. a lid gap (the mean of :data:`facetransfer.puppet_face.LID_PAIRS`' distances over
+    the eye's corner distance) above ``LID_SHADE[0]`` (0.08; the default model's lids stop
+    0.066-0.075 apart at eyeBlink 1). All shown for a model without landmarks."""
+    from ..puppet_face import lid_light
+
+    a = np.asarray(activations, np.float64)
+    if model.landmarks is None:
+        return np.ones((len(a), 2), bool)
+    lm = np.asarray(model.landmarks, np.int64)
+    P = np.asarray(rig.neutral, np.float64)[lm] + np.einsum(
+        "fj,jlc->flc", a, np.asarray(rig.deltas, np.float64)[:, lm])
+    return np.array([lid_light(p) > 0.0 for p in P]).reshape(len(a), 2)
+
+
+def eye_scales(shown: np.ndarray, radii) -> np.ndarray:
+    """The eyes' scale keys ``(F, 2)``: each eye's radius (``radii`` ``(2,)``, in the file's
+    units) where ``shown`` ``(F, 2)`` (:func:`eyes_shown`), :data:`SHUT_SCALE` of it where not."""
+    return np.where(np.asarray(shown, bool), 1.0, SHUT_SCALE) * np.asarray(radii, np.float64)
+
+
+def socket_cones(model, neutral: np.ndarray, deltas):
+    """The eye sockets, as the ``view`` page closes the eye holes: per eye hole of the mesh
+    (:func:`facetransfer.topology.mesh_topology`), a cone from its loop (the lid margins) to a
+    point :data:`facetransfer.export.viewer.CAVITY_DEPTH` ``["eye"]`` of its width behind
+    (:func:`facetransfer.export.viewer.loop_cones`: its rim's deltas are the loop's own, so it
+    follows the lids); None for a mesh without eye holes.
+
+    Parameters
+    ----------
+    neutral : (n, 3) float
+        The exported face.
+    deltas : (S, n, 3) float
+        Its shapes' offsets.
+    """
+    from ..topology import mesh_topology
+    from .viewer import CAVITY_DEPTH, loop_cones
+
+    loops = [(lp, CAVITY_DEPTH["eye"]) for lp in mesh_topology(model).eye_loops]
+    return loop_cones(neutral, deltas, loops) if loops else None
+
+
+def socket_colour() -> tuple:
+    """The sockets' sRGB colour: the ``view`` page's (``cavity_back``: the mouth's cavity colour
+    times :data:`facetransfer.palette.CAVITY_BACK`, the head's inside)."""
+    from ..palette import CAVITY_BACK, PALETTE
+
+    return tuple(int(round(c * CAVITY_BACK)) for c in PALETTE["cavity"])
 
 
 def _colour(theta: np.ndarray) -> np.ndarray:

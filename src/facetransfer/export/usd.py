@@ -20,6 +20,9 @@ Layout (``usd-core``, the optional extra ``facetransfer[usd]``)::
       /Face/teethUpper    Mesh, the upper teeth (:mod:`.teeth`, displayColor) on "head", rigid
       /Face/teethLower    Mesh, the lower teeth on "head", with a BlendShape prim per jaw shape
                           (jawOpen, jawLeft, jawRight, jawForward: the jaw's rigid motion)
+      /Face/eyeSockets    Mesh, the eye sockets (:func:`.gltf_eyes.socket_cones`) likewise
+                          (the lids' deltas); an eye joint's scale is SHUT_SCALE while its
+                          lids are shut (:func:`.gltf_eyes.eyes_shown`), else 1
 
 Time codes are frame numbers (``timeCodesPerSecond`` = the clip's fps): from 0, or, for a
 track of an image sequence numbered from N (a VFX plate's 1001), from N, so that the
@@ -155,11 +158,13 @@ def _root_extents(root, track, activations, rig, pxr, first: int) -> None:
         attr.Set(Vt.Vec3fArray.FromNumpy(box[k]), Usd.TimeCode(first + k))
 
 
-def _animation(stage, track, activations, pxr, first: int = 0, eyes=None):
+def _animation(stage, track, activations, pxr, first: int = 0, eyes=None, shown=None):
     """The SkelAnimation: the blend shapes' weights, the head joint's pose and, with ``eyes``
     (:func:`facetransfer.export.gltf_eyes.eye_placement`), each eye joint's turn about its
-    centre (:func:`facetransfer.export.gltf_eyes.eye_rotations`)."""
-    from .gltf_eyes import eye_rotations, track_eye_gaze
+    centre (:func:`facetransfer.export.gltf_eyes.eye_rotations`) and its scale, 1 or
+    :data:`facetransfer.export.gltf_eyes.SHUT_SCALE` where ``shown`` ``(F, 2)`` says its lids
+    are shut (:func:`facetransfer.export.gltf_eyes.eyes_shown`)."""
+    from .gltf_eyes import eye_rotations, eye_scales, track_eye_gaze
 
     Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = pxr
     anim = UsdSkel.Animation.Define(stage, "/Face/Skel/Anim")
@@ -173,14 +178,16 @@ def _animation(stage, track, activations, pxr, first: int = 0, eyes=None):
     if eyes is not None:
         Q = np.concatenate([Q, eye_rotations(activations, track_eye_gaze(track, activations))],
                            axis=1)
-    one = Vt.Vec3hArray([Gf.Vec3h(1, 1, 1)] * Q.shape[1])
+    S = np.ones((track.n_frames, Q.shape[1]))
+    if eyes is not None and shown is not None:
+        S[:, 1:] = eye_scales(shown, [1.0, 1.0])
     for k in range(track.n_frames):
         t = Usd.TimeCode(first + k)
         w.Set(Vt.FloatArray.FromNumpy(activations[k].astype(np.float32)), t)
         tr.Set(Vt.Vec3fArray([Gf.Vec3f(*map(float, T[k]))] + centres), t)
         ro.Set(Vt.QuatfArray([Gf.Quatf(float(q[3]), float(q[0]), float(q[1]), float(q[2]))
                               for q in Q[k]]), t)
-        sc.Set(one, t)
+        sc.Set(Vt.Vec3hArray([Gf.Vec3h(x, x, x) for x in S[k]]), t)
     return anim
 
 
@@ -203,20 +210,28 @@ def _bind(stage, skel, mesh, pxr, joint: int = 0, deltas=None, names=ARKIT_NAMES
 
 def _mouth_inside(stage, skel, rig, model, pxr) -> None:
     """The mouth's inside, ``/Face/mouthInside`` (none without a mouth gap): the glb's cone
-    (:func:`facetransfer.export.gltf.mouth_cone`) in the page's cavity colour, on "head", with
-    52 blend shapes of its own (the lips' deltas), so an open jaw opens onto it."""
-    from ..io.exr import srgb_decode
+    (:func:`facetransfer.export.gltf.mouth_cone`) in the page's cavity colour (:func:`_inside`)."""
     from ..palette import PALETTE
     from .gltf import mouth_cone
 
+    _inside(stage, skel, mouth_cone(model, rig.neutral, list(rig.deltas)), "/Face/mouthInside",
+            PALETTE["cavity"], pxr)
+
+
+def _inside(stage, skel, cone, path: str, colour, pxr) -> None:
+    """A cavity's inside at ``path`` (none where ``cone`` is None): the glb's cone
+    (:func:`facetransfer.export.viewer.loop_cones`) in the sRGB ``colour``, both sides shown, on
+    "head", with 52 blend shapes of its own (the holes' deltas): the mouth's (an open jaw opens
+    onto it) and the eye sockets' (the slit of shut lids shows them)."""
+    from ..io.exr import srgb_decode
+
     Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = pxr
-    cone = mouth_cone(model, rig.neutral, list(rig.deltas))
     if cone is None:
         return
     P, fan, deltas = cone
-    mesh = _tri_mesh(stage, "/Face/mouthInside", P, fan, pxr)
+    mesh = _tri_mesh(stage, path, P, fan, pxr)
     mesh.CreateDoubleSidedAttr(True)
-    lin = srgb_decode(np.asarray(PALETTE["cavity"], np.uint8))
+    lin = srgb_decode(np.asarray(colour, np.uint8))
     mesh.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(
         Vt.Vec3fArray([Gf.Vec3f(*map(float, lin))]))
     _bind(stage, skel, mesh, pxr, 0, deltas)
@@ -250,13 +265,16 @@ def _joints(eyes) -> list[str]:
     return ["head"] + ([] if eyes is None else [f"head/{n}" for n in EYE_NODES])
 
 
-def _eyeballs(stage, skel, eyes, pxr) -> None:
+def _eyeballs(stage, skel, eyes, pxr, rig, model) -> None:
     """The eyeball meshes ``/Face/eyeRight``, ``/Face/eyeLeft``, each bound rigidly to its
     joint (the sphere of :func:`facetransfer.export.gltf_eyes.eyeball_mesh` at the eye's centre
-    and radius, its colours as ``displayColor``)."""
-    from .gltf_eyes import EYE_NODES, eyeball_mesh
+    and radius, its colours as ``displayColor``), and the eye sockets ``/Face/eyeSockets``
+    (:func:`facetransfer.export.gltf_eyes.socket_cones`, :func:`_inside`)."""
+    from .gltf_eyes import EYE_NODES, eyeball_mesh, socket_colour, socket_cones
 
     Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = pxr
+    _inside(stage, skel, socket_cones(model, rig.neutral, rig.deltas), "/Face/eyeSockets",
+            socket_colour(), pxr)
     P, C, T = eyeball_mesh()
     for j, (name, centre, radius) in enumerate(zip(EYE_NODES, *eyes)):
         mesh = _tri_mesh(stage, f"/Face/{name}", P * radius + centre, T, pxr)
@@ -284,7 +302,7 @@ def write_usd(track, model, out: str | os.PathLike, *, overwrite: bool = False,
     stage.SetEndTimeCode(first_frame + track.n_frames - 1)
     root = UsdSkel.Root.Define(stage, "/Face")
     stage.SetDefaultPrim(root.GetPrim())
-    from .gltf_eyes import eye_placement
+    from .gltf_eyes import eye_placement, eyes_shown
 
     eyes = eye_placement(model, rig.neutral)
     skel = UsdSkel.Skeleton.Define(stage, "/Face/Skel")
@@ -293,14 +311,15 @@ def write_usd(track, model, out: str | os.PathLike, *, overwrite: bool = False,
         Gf.Matrix4d(1).SetTranslate(Gf.Vec3d(*map(float, c))) for c in eyes[0]])
     skel.CreateBindTransformsAttr(Vt.Matrix4dArray(at))   # the eyes' centres, in the head's
     skel.CreateRestTransformsAttr(Vt.Matrix4dArray(at))   # frame: world = local below head
-    anim = _animation(stage, track, a, pxr, int(first_frame), eyes)
+    anim = _animation(stage, track, a, pxr, int(first_frame), eyes,
+                      None if eyes is None else eyes_shown(model, rig, a))
     UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets(
         [anim.GetPath()])
     mesh = _mesh(stage, rig, model, pxr)
     _root_extents(root, track, a, rig, pxr, int(first_frame))
     _bind(stage, skel, mesh, pxr, 0, rig.deltas)
     if eyes is not None:
-        _eyeballs(stage, skel, eyes, pxr)
+        _eyeballs(stage, skel, eyes, pxr, rig, model)
     _mouth_inside(stage, skel, rig, model, pxr)
     _teeth(stage, skel, rig, model, pxr)
     meta = {"source": source_name(track.source), "generator": "facetransfer"}

@@ -52,7 +52,7 @@ from .common import ExportError, head_quaternions, require_activations, source_n
 log = logging.getLogger(__name__)
 
 __all__ = ["THREE_VERSION", "THREE_SHA256", "viewer_page", "write_viewer", "view_rig", "eye_data",
-           "page_palette"]
+           "page_palette", "cavity_cone", "loop_cones"]
 
 #: The vendored three.js release and the sha256 of its ``build/three.min.js``.
 THREE_VERSION = "0.159.0"
@@ -250,20 +250,66 @@ def _mouth_faces(loops: list) -> int:
     return int(loops[0][0].size) if loops and loops[0][1] == CAVITY_DEPTH["mouth"] else 0
 
 
+def cavity_cone(points: np.ndarray, loop: np.ndarray, depth: float, apex: int, *offsets):
+    """The cone that closes the hole ``loop`` ``(k,)`` of a face ``points`` ``(n, 3)`` (the
+    face looks along +z): the mouth's inside and the eye sockets of the `view` page
+    (:func:`_closed`), the glb and the USD (:func:`loop_cones`).
+
+    Returns
+    -------
+    fan : (k, 3) int64
+        A triangle per edge of the loop to the vertex ``apex`` (oriented as
+        :func:`facetransfer.topology.mesh_topology` closes the mouth: facing out of the face).
+    point : (3,) float64
+        The apex: behind the mean of the loop's points by ``depth`` times the loop's width (x
+        extent).
+    moved : each ``(..., 3)``
+        Per array of ``offsets`` (``(..., n, 3)``: shape offsets of the face), the apex's: the
+        mean of the loop's, so that it follows the lips, or the lids.
+    """
+    lp = np.asarray(loop, np.int64)
+    rim = np.asarray(points, np.float64)[lp]
+    fan = np.stack([np.roll(lp, -1), lp, np.full_like(lp, apex)], axis=1)
+    point = rim.mean(axis=0) - [0.0, 0.0, depth * np.ptp(rim[:, 0])]
+    return (fan, point, *(np.asarray(a)[..., lp, :].mean(axis=-2) for a in offsets))
+
+
+def loop_cones(neutral: np.ndarray, deltas, loops: list):
+    """Cones closing holes of the face ``neutral`` ``(n, 3)``, one triangle set: per ``(loop,
+    depth)`` of ``loops`` the `view` page's cone (:func:`cavity_cone`) from the loop's points
+    to its apex ``depth`` loop widths behind: the glb's and the USD's mouth inside
+    (:func:`facetransfer.export.gltf.mouth_cone`) and eye sockets
+    (:func:`facetransfer.export.gltf_eyes.socket_cones`).
+
+    Returns
+    -------
+    tuple
+        ``(points (m, 3) float32, fan (t, 3) int64, [deltas (m, 3) float32 per shape])``: each
+        loop's points then its apex, the triangles (facing out of the face), and per shape of
+        ``deltas`` (``(S, n, 3)``, the face's) the loops' own deltas and their means for the
+        apexes: so each rim is the hole's boundary at any weights in a linear morph evaluator.
+    """
+    D = np.asarray(deltas)
+    points, fans, moved = [], [], []
+    for lp, depth in loops:
+        rim, base = np.asarray(neutral, np.float64)[lp], sum(len(p) for p in points)
+        fan, apex, d = cavity_cone(rim, np.arange(len(lp)), depth, len(lp), D[:, lp])
+        points += [rim, apex[None]]
+        fans.append(fan + base)
+        moved.append(np.concatenate([D[:, lp], d[:, None]], axis=1))
+    return (np.concatenate(points).astype(np.float32), np.concatenate(fans),
+            list(np.concatenate(moved, axis=1).astype(np.float32)))
+
+
 def _closed(loops: list, faces: np.ndarray, neutral: np.ndarray, *offsets: np.ndarray):
     """``faces``, ``neutral`` (n, 3) and each of ``offsets`` (``(S, n, 3)``: shape offsets) with
-    a vertex per ``(loop, depth)`` of ``loops`` appended and a fan from the loop to it (oriented
-    as :func:`facetransfer.topology.mesh_topology` closes the mouth). The vertex lies behind the
-    mean of the loop's (the face looks along +z) by ``depth`` times the loop's width; its
-    offsets are the mean of the loop's (it follows the lips, or the lids)."""
+    the apex of :func:`cavity_cone` per ``(loop, depth)`` of ``loops`` appended and its fan."""
     n = neutral.shape[0]
-    fans = [np.stack([np.roll(lp, -1), lp, np.full_like(lp, n + j)], axis=1)
-            for j, (lp, _) in enumerate(loops)]
-    apex = [neutral[lp].mean(axis=0) - [0.0, 0.0, d * np.ptp(neutral[lp, 0])] for lp, d in loops]
-    out = [np.concatenate([a] + [a[..., lp, :].mean(axis=-2)[..., None, :] for lp, _ in loops],
-                          axis=-2) for a in offsets]
-    return (np.concatenate([np.asarray(faces, np.int64), *fans]),
-            np.concatenate([neutral, np.reshape(apex, (-1, 3))]), *out)
+    cones = [cavity_cone(neutral, lp, d, n + j, *offsets) for j, (lp, d) in enumerate(loops)]
+    out = [np.concatenate([a] + [c[2 + i][..., None, :] for c in cones], axis=-2)
+           for i, a in enumerate(offsets)]
+    return (np.concatenate([np.asarray(faces, np.int64), *(c[0] for c in cones)]),
+            np.concatenate([neutral, np.reshape([c[1] for c in cones], (-1, 3))]), *out)
 
 
 def _frame_gaze(track, activations: np.ndarray) -> str | None:
