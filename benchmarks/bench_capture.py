@@ -465,6 +465,42 @@ def blink_levels(A: np.ndarray | None, shapes: np.ndarray, ref478: np.ndarray, *
     return out
 
 
+def lid_closure(ref478: np.ndarray, side: str) -> np.ndarray:
+    """``(F,)``: how closed eye ``side`` is by the reference's own lids, ``1 - gap / median
+    gap`` clipped to [0, 1] (the gap: :data:`_mp_points.LIDS` over the eye-corner distance; the
+    clip's median gap is its eye at rest, nearly every frame's): 0 open, 1 the lids touching,
+    linear between, as ARKit's eyeBlink is defined."""
+    gap = mp.measure(np.asarray(ref478, np.float64), mp.LIDS[side])
+    return np.clip(1.0 - gap / np.median(gap), 0.0, 1.0)
+
+
+def blink_closure(A: np.ndarray | None, shapes: np.ndarray, ref478: np.ndarray) -> dict:
+    """eyeBlink* of ours and Face Landmarker's against the lids' closure that the reference's
+    points show (:func:`lid_closure`), per eye: correlation, the slope of the score on the
+    closure (least squares with an intercept: 1 where a score reads the lids' closure at its
+    own amplitude) and the std ratio score : closure. A third reading beside ours and the
+    peer's, from the peer's own points: which of the two scores follows the lids at their
+    amplitude. ``{"eyeBlinkLeft": {"ours": {...}, "mediapipe": {...}}, ...}``."""
+    from facetransfer.arkit import ARKIT_NAMES
+
+    F = len(shapes) if A is None else min(len(A), len(shapes), len(ref478))
+    out = {}
+    for side in mp.LIDS:
+        c = lid_closure(np.asarray(ref478[:F]), side)
+        k = ARKIT_NAMES.index(f"eyeBlink{side}")
+        row = {}
+        for who, S in (("ours", A), ("mediapipe", shapes)):
+            if S is None:
+                continue
+            y = np.asarray(S[:F, k], np.float64)
+            ok = np.isfinite(y) & np.isfinite(c)
+            slope = (float(np.polyfit(c[ok], y[ok], 1)[0])
+                     if ok.sum() >= 3 and np.std(c[ok]) > 1e-9 else None)
+            row[who] = {"corr": _r(corr(y, c)), "slope": _r(slope), "std_ratio": _r(std_ratio(y, c))}
+        out[f"eyeBlink{side}"] = row
+    return out
+
+
 #: MediaPipe eye corners (outer, inner) and iris centre per eye, by the subject's side.
 _EYES = {"Right": (33, 133, 468), "Left": (263, 362, 473)}
 
@@ -638,6 +674,7 @@ def run_real(model, cache: Path, quick: bool) -> dict:
         r["mediapipe_vs_reference"] = peer_agreement(mp478, ref)
         r["gaze"] = gaze_scores(mp478, shapes, ours["activations"])
         r["blink_levels"] = blink_levels(ours["activations"], shapes, ref)
+        r["blink_closure"] = blink_closure(ours["activations"], shapes, ref)
         if name == "driving_d6":
             F = len(ours["landmarks"])
             r["drift_jitter"] = drift_jitter(ours["landmarks"], mediapipe_to_ibug(ref[:F]))
@@ -704,6 +741,7 @@ def print_real(real: dict) -> None:
         print("gaze vs Face Landmarker's eyeLook* (median corr): " + ", ".join(
             f"{k} iris {med(k, 'iris_corr'):.2f} ours {med(k, 'ours_corr'):.2f}" for k in gz[0]))
     _print_blink_levels(real)
+    _print_blink_closure(real)
     ceil = real.get("jaw_reading_ceiling", {}).get("median")
     if ceil:
         print("Face Landmarker's jawOpen read from its own points (median corr): lip gap "
@@ -715,6 +753,24 @@ def print_real(real: dict) -> None:
             print(f"{n}: jitter {d['jitter']} (reference {d['jitter_reference']}), drift "
                   f"{d['drift']} over {d['frames']} frames; tracking {c['fps']} fps, "
                   f"{c['lost']} lost")
+
+
+def _print_blink_closure(real: dict) -> None:
+    """One line per eye: the median over clips of eyeBlink*'s slope on the lids' closure
+    (:func:`blink_closure`), ours and Face Landmarker's, and their std ratios."""
+    rows = [c["blink_closure"] for c in real["clips"].values() if "blink_closure" in c]
+    if not rows:
+        return
+    print("eyeBlink* against the lids' closure by the reference's points (1 - gap / median gap; "
+          "ARKit: slope 1), median over clips of slope / std ratio / r:")
+    for eye in rows[0]:
+        cells = []
+        for who, label in (("ours", "ours"), ("mediapipe", "Face Landmarker")):
+            vals = [r[eye][who] for r in rows if who in r[eye]]
+            med = [np.nanmedian([np.nan if v[f] is None else v[f] for v in vals])
+                   for f in ("slope", "std_ratio", "corr")]
+            cells.append(f"{label} {med[0]:.2f} / {med[1]:.2f} / {med[2]:.2f}")
+        print(f"  {eye}: " + ", ".join(cells))
 
 
 def _print_blink_levels(real: dict) -> None:
