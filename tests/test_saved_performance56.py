@@ -155,6 +155,9 @@ def test_the_mark_is_kept_by_the_transforms_and_checked(saved, tmp_path):
     with pytest.raises(TrackError, match=r"'made_by' must hold text"):
         Track.load(bad)
     assert made_by_of(bad) == "" and made_by_of(tmp_path / "missing.npz") == ""
+    np.save(tmp_path / "array.npy", np.zeros(3))            # an .npy, or one named .npz
+    (tmp_path / "array.npy").rename(tmp_path / "array.npz")
+    assert made_by_of(tmp_path / "array.npz") == ""
 
 
 def test_the_mark_is_no_part_of_a_renders_key(saved):

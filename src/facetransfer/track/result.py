@@ -491,7 +491,10 @@ def made_by_of(path: str | os.PathLike) -> str:
     from ..io.npz import NOT_ARCHIVE_ERRORS
 
     try:
-        with np.load(path, allow_pickle=False) as z:
+        z = np.load(path, mmap_mode="r", allow_pickle=False)   # an .npy: mapped, not read
+        if not isinstance(z, np.lib.npyio.NpzFile):
+            return ""
+        with z:
             if "made_by" not in z.files:
                 return ""
             a = z["made_by"]
