@@ -83,14 +83,14 @@ def _update_value(h, value) -> None:
 
 def _update_track(h, track) -> None:
     """Digest a :class:`~facetransfer.track.result.Track` by every field but ``info`` (which
-    holds timings)."""
+    holds timings) and ``made_by`` (what made a performance: no pixel depends on it)."""
     if track is None:
         h.update(b"none")
         return
     for f in dataclasses.fields(track):
         if f.name == "occluded" and track.occluded is None:
             continue            # a track not tested keys as before the field was added
-        if f.name != "info":
+        if f.name not in ("info", "made_by"):
             h.update(f.name.encode())
             _update_value(h, getattr(track, f.name))
 

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -122,6 +123,50 @@ class TransferSources:
                    src(expression_from, expression_track),
                    src(viseme_from, viseme_track), src(identity_from, identity_track),
                    src(pose_from, pose_track), identity, performance, take_sync)
+
+
+#: The option that gives each kind of :class:`TransferSources`' track file (the messages').
+TRACK_FLAGS = {"target": "--target-track", "expression": "--source-track",
+               "viseme": "--viseme-track", "identity": "--identity-track",
+               "pose": "--pose-track"}
+
+
+def check_given_tracks(sources: TransferSources) -> None:
+    """RewriteError where a track file given for a clip (:data:`TRACK_FLAGS`) is a
+    performance made by a transfer (:attr:`facetransfer.track.Track.made_by`, ``transfer
+    --save-track``) rather than that clip's track: the source's expressions on the target's
+    head, which taken as the target's made the transfer think the target never opened its
+    mouth (a 512² target's mouths measured 0.006 open instead of 0.108, the take's closed
+    mouth drawn as the target's open smile; fifty-sixth session). Read before any work; a
+    file without the mark is a track as before."""
+    for kind, flag in TRACK_FLAGS.items():
+        src = getattr(sources, kind)
+        if src is None or not isinstance(src.track, (str, os.PathLike)):
+            continue
+        line = performance_given(src.track, flag, kind, src.video)
+        if line:
+            raise RewriteError(line)
+
+
+def performance_given(path, name: str, kind: str, video) -> str | None:
+    """The line refusing the track file ``path``, given as ``name`` (an option,
+    ``--target-track``, or a ``batch`` manifest's column, ``target_track``) for the ``kind``
+    of clip ``video`` (``"target"``, ``"expression"``...), where it is a performance a
+    transfer made (:func:`check_given_tracks`); None for a clip's track (a file without the
+    mark, :func:`facetransfer.track.result.made_by_of`)."""
+    from .track.result import MADE_BY_TRANSFER, made_by_of
+
+    made = made_by_of(path)
+    if not made:
+        return None
+    what = ("a transfer's saved performance (--save-track: the expressions it rendered on the "
+            "target's head)") if made == MADE_BY_TRANSFER else f"a performance made by {made}"
+    whose = "target" if kind == "target" else f"{kind} source"
+    perf = "--performance" if name.startswith("--") else "performance"
+    return (f"{name} {path} is {what}, not a track of the {whose} {video}: give the clip's own "
+            f"track (`facetransfer track {video} --out TRACK.npz`) or leave {name} out (the "
+            f"track cache keeps the first run's); to render the performance itself, give it "
+            f"as {perf}")
 
 
 @dataclass(frozen=True)
@@ -281,6 +326,7 @@ def plan_sources(sources: TransferSources, model, *, options: RewriteOptions | N
 
     if max_frames is not None and int(max_frames) < 1:
         raise RewriteError(f"max_frames must be >= 1, got {max_frames}")
+    check_given_tracks(sources)                 # before any work
     sources = _take_as_performance(sources, align, model)
     options = RewriteOptions() if options is None else options
     planner = _Planner(model, options.track_method, track_options(options.speed),
@@ -741,6 +787,7 @@ def _performance_plan(inputs: _Inputs, sources: TransferSources, model) -> Trans
         new = perf.performance(tt, model)
     else:
         new = perf if isinstance(perf, Track) else Track.load(perf)
+    new = _as_performance(new)
     new.check_model(model)
     W, H = inputs.size
     if tuple(new.frame_size) != (W, H):
@@ -766,6 +813,15 @@ def _performance_plan(inputs: _Inputs, sources: TransferSources, model) -> Trans
                         performance=True)
 
 
+def _as_performance(track):
+    """``track`` marked as a transfer's new performance (:attr:`facetransfer.track.Track.
+    made_by`; one marked already keeps its mark): what ``--save-track`` writes is then told
+    from a clip's track (:func:`check_given_tracks`)."""
+    from .track.result import MADE_BY_TRANSFER
+
+    return track if track.made_by else dataclasses.replace(track, made_by=MADE_BY_TRANSFER)
+
+
 def _lifted_once(frames, target_track, target) -> tuple:
     """``(frames, track)`` the mouth's texture function of a ready performance is lifted from:
     the target's; of a photo held over ``n`` frames (:func:`held_frames`), its one frame
@@ -785,7 +841,7 @@ def _recombined_plan(inputs: _Inputs, sources: TransferSources, model, align) ->
     new = recombine(tt, expression=tracks.get("expression"), viseme=tracks.get("viseme"),
                     identity=_identity_weights(inputs, sources, model), pose=tracks.get("pose"),
                     align=align)
-    new = project_landmarks(new, model)
+    new = _as_performance(project_landmarks(new, model))
     mouth_kind = "viseme" if "viseme" in tracks else ("expression" if "expression" in tracks
                                                       else None)
     if mouth_kind is None:

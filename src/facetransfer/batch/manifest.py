@@ -359,6 +359,7 @@ def pair_jobs(manifest: str | os.PathLike) -> list[PairJob]:
                 raise BatchError(f"{where}: {track} needs {video} (the video it belongs to)")
         if not any(row.get(c) for c in PAIR_SOURCES):
             raise BatchError(f"{where}: nothing to transfer (give one of {list(PAIR_SOURCES)})")
+        _check_pair_tracks(row, where)
         for col in ("target_face", "source_face"):
             _check_face(row.get(col), f"{where}: {col}")
         if row.get("identity_from") and (row.get("identity_label") or row.get("identity_weights")):
@@ -369,6 +370,23 @@ def pair_jobs(manifest: str | os.PathLike) -> list[PairJob]:
                             sources))
     check_unique_names(jobs)
     return jobs
+
+
+def _check_pair_tracks(row: dict, where: str) -> None:
+    """BatchError where a track column of a pairs row holds a transfer's saved performance
+    (``transfer --save-track``), not the clip's track
+    (:func:`facetransfer.transfer_plan.performance_given`): refused with the manifest, before
+    any job runs."""
+    from ..transfer_plan import performance_given
+
+    for col, video, kind in (("target_track", "target", "target"),
+                             ("source_track", "expression_from", "expression"),
+                             ("viseme_track", "viseme_from", "viseme"),
+                             ("identity_track", "identity_from", "identity"),
+                             ("pose_track", "pose_from", "pose")):
+        line = performance_given(row[col], col, kind, row.get(video)) if row.get(col) else None
+        if line:
+            raise BatchError(f"{where}: {line}")
 
 
 def export_jobs(tracks) -> list[ExportJob]:

@@ -228,7 +228,10 @@ def register(sub) -> None:
                    "frame, a one-frame clip's only one")
     add_rewrite_options(p)
     p.add_argument("--meshes", metavar="DIR", help="also write the new meshes as OBJ files")
-    p.add_argument("--save-track", metavar="OUT.npz", help="also write the new performance")
+    p.add_argument("--save-track", metavar="OUT.npz",
+                   help="also write the new performance (marked as one: --performance, "
+                   "export, view and puppet take it; not a track of the target: for a second "
+                   "run leave --target-track out, the track cache keeps the target's track)")
     add_output(p, run_transfer, metavar="OUT.mp4", video=True,
                 help="video to write (.mp4, .mov, .mkv...), image sequence (frames/%%05d.png) "
                 "or one image (result.png, .jpg, .tif: a photo's or a one-frame clip's "
@@ -247,7 +250,9 @@ def register(sub) -> None:
 def _add_sources(p) -> None:
     """``transfer``'s inputs: the target and, per attribute, a video and its track file."""
     p.add_argument("--target", required=True, metavar="T.mp4", help="footage to rewrite")
-    p.add_argument("--target-track", metavar="T.npz", help="track file of the target (reused)")
+    p.add_argument("--target-track", metavar="T.npz",
+                   help="track file of the target (reused): `facetransfer track T.mp4`'s, "
+                   "not --save-track's performance")
     p.add_argument("--expression-from", metavar="S.mp4",
                    help="video whose expressions to use, or a Live Link Face take (S.csv: its "
                    "ARKit activations by its timecodes; the mouth's texture then comes from "

@@ -30,6 +30,9 @@ key                     shape / dtype        meaning
 ``source_first_frame``  () int64             the clip's first frame number (absent: not recorded)
 ``source_timecode``     () str               the clip's start timecode ("" none; with the above)
 ``occluded``            (F, 3) bool          mouth, right eye, left eye covered (absent: not tested)
+``made_by``             () str               what made a performance that was not tracked from
+                                             ``source`` ("transfer": ``transfer --save-track``'s
+                                             new performance); absent: a track of ``source``
 ``format_version``      () int64             version of this layout
 ======================  ===================  =======================================================
 """
@@ -47,10 +50,16 @@ from ..errors import TrackError
 from ..io.atomic import atomic_path
 from ..io.source_facts import SourceFacts
 
-__all__ = ["Track", "TRACK_FORMAT_VERSION"]
+__all__ = ["Track", "TRACK_FORMAT_VERSION", "MADE_BY_TRANSFER", "made_by_of"]
 
 #: Version of the track file layout written by :meth:`Track.save`.
 TRACK_FORMAT_VERSION = 1
+
+#: :attr:`Track.made_by` of a transfer's new performance (``transfer --save-track``).
+MADE_BY_TRANSFER = "transfer"
+
+#: The longest :attr:`Track.made_by` a track file may hold (characters): a word or two.
+MADE_BY_LONGEST = 200
 
 #: The frame rates a track may have (frames per second): beyond them the video writer fails
 #: with a message about itself, not the track (1e-300 and 1e300 were read).
@@ -141,6 +150,15 @@ class Track:
         Per frame, whether the mouth, the right eye and the left eye were found covered
         (:mod:`facetransfer.track.occlusion`: their activations bridged there); None: not
         tested.
+    made_by : str
+        "" for a track of its clip (``source``, tracked or imported); else what made this
+        performance instead (:data:`MADE_BY_TRANSFER`: a transfer's new performance, the
+        source's expressions on the target's head, ``transfer --save-track``), which is no
+        clip's own track: a transfer refuses it as one (``--target-track``,
+        :func:`facetransfer.transfer_plan.check_given_tracks`), a performance's readers
+        (``export``, ``view``, ``puppet``, ``edit``, ``--performance``) take it as before. Kept
+        by the transforms that copy a track (:func:`dataclasses.replace`: ``take_frames``,
+        ``edit``); not part of a render's key (:mod:`facetransfer.render_cache`).
     """
 
     fps: float
@@ -163,6 +181,7 @@ class Track:
     shot_starts: tuple[int, ...] = ()
     source_facts: SourceFacts | None = None
     occluded: np.ndarray | None = None
+    made_by: str = ""
 
     def __post_init__(self) -> None:
         R = np.asarray(self.rotation, dtype=np.float64)
@@ -253,6 +272,11 @@ class Track:
         if self.source_facts is not None and not isinstance(self.source_facts, SourceFacts):
             raise TrackError(f"track source_facts must be a SourceFacts, got "
                              f"{type(self.source_facts).__name__}")
+        made = str(self.made_by)
+        if len(made) > MADE_BY_LONGEST or not made.isprintable():
+            raise TrackError(f"track made_by must be a line of at most {MADE_BY_LONGEST} "
+                             f"characters, got {made[:40]!r}")
+        set_(self, "made_by", made)
 
     def _check_blendshapes(self, F: int) -> None:
         if self.blendshapes is None:
@@ -387,6 +411,8 @@ class Track:
             arrays["detections2d"] = self.detections2d
         if self.occluded is not None:
             arrays["occluded"] = self.occluded
+        if self.made_by:             # a track of a clip: written as before the key was
+            arrays["made_by"] = np.array(self.made_by)
         if self.shot_starts:
             arrays["shot_starts"] = np.asarray(self.shot_starts, np.int64)
         if self.source_facts is not None:
@@ -448,15 +474,38 @@ class Track:
                                             TrackError) if "pixel_aspect" in data else 1.0),
                        shot_starts=tuple(np.asarray(data.get("shot_starts", ())).ravel()),
                        source_facts=_source_facts(data, p), info={"file": str(p)},
-                       occluded=data.get("occluded"))
+                       occluded=data.get("occluded"),
+                       made_by=scalar(data, "made_by", str, p, "track file", TrackError)
+                       if "made_by" in data else "")
         except (TrackError, ValueError, TypeError, OverflowError) as exc:
             if str(p) in str(exc):   # said of the file already: not twice
                 raise TrackError(str(exc)) from None
             raise TrackError(f"track file {p} is invalid: {exc}") from None
 
 
+def made_by_of(path: str | os.PathLike) -> str:
+    """The :attr:`Track.made_by` of the track file ``path``, read alone (its other arrays are
+    not read: a check before any work); "" for a track of a clip, a file written before the
+    key was, or one that is not a readable track file (:meth:`Track.load` says what is wrong
+    with it where it is read)."""
+    from ..io.npz import NOT_ARCHIVE_ERRORS
+
+    try:
+        z = np.load(path, mmap_mode="r", allow_pickle=False)   # an .npy: mapped, not read
+        if not isinstance(z, np.lib.npyio.NpzFile):
+            return ""
+        with z:
+            if "made_by" not in z.files:
+                return ""
+            a = z["made_by"]
+    except (*NOT_ARCHIVE_ERRORS, AttributeError, KeyError):
+        return ""
+    return str(a.reshape(())) if a.dtype.kind in "US" and a.size == 1 else ""
+
+
 #: Track file keys that hold text; every other key holds numbers.
-_TEXT_KEYS = ("mode_names", "blendshape_names", "model_hash", "source", "source_timecode")
+_TEXT_KEYS = ("mode_names", "blendshape_names", "model_hash", "source", "source_timecode",
+              "made_by")
 
 
 def _check_version(data: dict, p: Path) -> None:
