@@ -137,7 +137,7 @@ def _track_table_keys() -> set[str]:
 def _full_track(n: int = 4):
     """A track with every optional part (ARKit activations, detections, two shots, non-square
     pixels, the clip's numbering, the covered regions), as a capture of an edited anamorphic
-    clip makes it (``track --occluders``)."""
+    clip makes it (``track --occluders``), marked as a transfer's saved performance (``made_by``)."""
     from facetransfer.arkit import ARKIT_NAMES
     from facetransfer.io.source_facts import SourceFacts
     from facetransfer.track.result import Track
@@ -151,7 +151,7 @@ def _full_track(n: int = 4):
                  blendshapes=np.zeros((n, 52), np.float32), blendshape_names=ARKIT_NAMES,
                  detections2d=np.zeros((n, 68, 2)), pixel_aspect=0.9375, shot_starts=(2,),
                  source_facts=SourceFacts(1001, "01:00:00:00"),
-                 occluded=np.zeros((n, 3), bool))
+                 occluded=np.zeros((n, 3), bool), made_by="transfer")
 
 
 def test_the_track_file_table_lists_exactly_the_keys_a_track_writes(tmp_path):
