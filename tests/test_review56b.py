@@ -120,3 +120,25 @@ def test_mouth_texture_function_announces_the_frames_it_lifts(quick_model):
                                 progress=lambda n: seen.append(("step", n)))
     assert fn.frames.size == len(frames)
     assert seen == [("total", len(frames))] + [("step", 1)] * len(frames)
+
+
+def test_the_funnel_gate_asks_nothing_of_a_paper_model_and_skips_lost_frames(quick_model,
+                                                                            arkit_model):
+    """review56b (checked, not mended): a model without ARKit activations (the paper's
+    bilinear model) has no funnel to hold (None); a lost frame's NaN points gate nothing."""
+    from facetransfer.arkit import ARKIT_NAMES
+    from facetransfer.track import capture_points
+    from facetransfer.track.capture import CaptureOptions, funnel_ridges
+    from facetransfer.track.capture_points import Shape
+
+    opt = CaptureOptions()
+    pts = np.zeros((3, 68, 2))
+    pts[:, 36], pts[:, 45] = (0.0, 0.0), (10.0, 0.0)       # lips shut (gap 0) in frames 0, 2
+    pts[1] = np.nan                                          # frame 1 lost
+    paper = Shape(quick_model, np.asarray(quick_model.default_weights()["identity"]),
+                  capture_points.sampler(quick_model), opt)
+    assert funnel_ridges(paper, pts, opt) is None
+    shape = Shape(arkit_model, np.asarray(arkit_model.default_weights()["identity"]),
+                  capture_points.sampler(arkit_model), opt)
+    k = int(np.flatnonzero(shape.used == ARKIT_NAMES.index("mouthFunnel"))[0])
+    np.testing.assert_allclose(funnel_ridges(shape, pts, opt)[:, k], [1.0, 0.0, 1.0])
