@@ -142,3 +142,15 @@ def test_the_funnel_gate_asks_nothing_of_a_paper_model_and_skips_lost_frames(qui
                   capture_points.sampler(arkit_model), opt)
     k = int(np.flatnonzero(shape.used == ARKIT_NAMES.index("mouthFunnel"))[0])
     np.testing.assert_allclose(funnel_ridges(shape, pts, opt)[:, k], [1.0, 0.0, 1.0])
+
+
+def test_made_by_none_is_a_clips_track_not_one_made_by_none(quick_track, tmp_path):
+    """``Track(..., made_by=None)`` (None, as the other optional fields take it) was marked
+    ``"None"``: saved so, and refused as ``--target-track`` "a performance made by None"."""
+    from facetransfer.transfer_plan import performance_given
+
+    t = dataclasses.replace(quick_track, made_by=None)
+    assert t.made_by == ""
+    t.save(tmp_path / "t.npz")
+    assert Track.load(tmp_path / "t.npz").made_by == ""
+    assert performance_given(tmp_path / "t.npz", "--target-track", "target", "t.mp4") is None
