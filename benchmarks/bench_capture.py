@@ -469,9 +469,11 @@ def lid_closure(ref478: np.ndarray, side: str) -> np.ndarray:
     """``(F,)``: how closed eye ``side`` is by the reference's own lids, ``1 - gap / median
     gap`` clipped to [0, 1] (the gap: :data:`_mp_points.LIDS` over the eye-corner distance; the
     clip's median gap is its eye at rest, nearly every frame's): 0 open, 1 the lids touching,
-    linear between, as ARKit's eyeBlink is defined."""
+    linear between, as ARKit's eyeBlink is defined; NaN where the reference has no points (a
+    frame it lost: the median is of the others)."""
     gap = mp.measure(np.asarray(ref478, np.float64), mp.LIDS[side])
-    return np.clip(1.0 - gap / np.median(gap), 0.0, 1.0)
+    with np.errstate(invalid="ignore"):
+        return np.clip(1.0 - gap / np.nanmedian(gap), 0.0, 1.0)
 
 
 def blink_closure(A: np.ndarray | None, shapes: np.ndarray, ref478: np.ndarray) -> dict:

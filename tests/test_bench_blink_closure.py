@@ -50,3 +50,21 @@ def test_the_lids_closure_and_each_scores_slope_on_it():
         assert out[eye]["mediapipe"]["slope"] == pytest.approx(0.6, abs=1e-4)
         assert out[eye]["mediapipe"]["std_ratio"] == pytest.approx(0.6, abs=1e-4)
         assert out[eye]["mediapipe"]["corr"] == pytest.approx(1.0, abs=1e-4)
+
+
+def test_a_frame_the_reference_lost_leaves_the_others_closure(tmp_path):
+    """review56b: a frame without reference points (NaN) made the clip's median gap NaN, so
+    every frame's closure, and the clip's slope and r, came out empty; it is now that frame's
+    alone."""
+    gaps = np.array([10.0] * 12 + [8.0, 4.0, 0.0, 0.0, 4.0, 8.0] + [10.0] * 10)
+    ref = _blinking_points(gaps)
+    ref[3] = np.nan
+    c = bc.lid_closure(ref, "Right")
+    want = np.clip(1 - gaps / 10.0, 0, 1)
+    want[3] = np.nan
+    np.testing.assert_allclose(c, want, atol=1e-12)
+    F = len(gaps)
+    ours = np.zeros((F, len(ARKIT_NAMES)))
+    ours[:, ARKIT_NAMES.index("eyeBlinkRight")] = np.nan_to_num(c)
+    out = bc.blink_closure(ours, ours, ref)["eyeBlinkRight"]["ours"]
+    assert out["slope"] == pytest.approx(1.0, abs=1e-4) and out["corr"] == pytest.approx(1.0)

@@ -142,7 +142,8 @@ def track_facts(path: str | os.PathLike) -> dict:
         "mean_confidence": float(np.mean(t.confidence)) if n else 0.0,
         "shots": [first + s for s in (0, *t.shot_starts)],
         "neutral_frame": None if t.info.get("neutral_frame") is None else
-        first + int(t.info["neutral_frame"])}
+        first + int(t.info["neutral_frame"]),
+        "made_by": t.made_by or None}
 
 
 def take_facts(path: str | os.PathLike) -> dict:
@@ -213,7 +214,20 @@ def _track_lines(f: dict) -> list[str]:
         lines.append(f"  {len(f['shots'])} shots, from frames {', '.join(map(str, f['shots']))}")
     if f["neutral_frame"] is not None:
         lines.append(f"  activations measured from the neutral frame {f['neutral_frame']}")
+    if f.get("made_by"):
+        lines.append(_made_by_line(f["made_by"]))
     return lines
+
+
+def _made_by_line(made_by: str) -> str:
+    """What a track file marked as a performance (:attr:`facetransfer.track.Track.made_by`)
+    is for: ``--performance``, ``export``, ``view``, ``puppet``; not a clip's own track."""
+    from .track.result import MADE_BY_TRANSFER
+
+    what = ("a transfer's saved performance (--save-track: the source's expressions on the "
+            "target's head)") if made_by == MADE_BY_TRANSFER else f"a performance made by {made_by}"
+    return (f"  {what}: give it as --performance, or to export, view, puppet; not a track of "
+            "the clip it was made from (refused as --target-track)")
 
 
 def _take_lines(f: dict) -> list[str]:

@@ -42,7 +42,7 @@ from .io.video_sequence import is_still
 from .io.plate_output import plate_output
 from .io.video_like import like_video
 from .rewrite_options import RewriteOptions
-from .texture.face import MOUTH_MAX_FRAMES, MouthFunction, resolve_mouth_mode
+from .texture.face import MouthFunction, resolve_mouth_mode
 from .transfer_plan import TransferPlan, TransferSources, plan_sources, plan_transfer  # noqa: F401
 
 log = logging.getLogger(__name__)
@@ -412,16 +412,20 @@ def _matte_writer(key: str | None, plan: TransferPlan, matte, video_options, ove
 
 
 def _lift_mouth(plan: TransferPlan, model, progress_factory) -> MouthFunction:
-    """The plan's mouth texture function (:meth:`TransferPlan.mouth_function`), with a bar."""
-    total = min(MOUTH_MAX_FRAMES, len(plan.texture_frames) if plan.texture_frames is not None
-                else plan.n_frames)
-    lift_bar = progress_factory("mouth texture", total) if progress_factory else None
+    """The plan's mouth texture function (:meth:`TransferPlan.mouth_function`), with a bar
+    of the frames it lifts (made once their count is known: ``"auto"`` lifts fewer than
+    :data:`~facetransfer.texture.face.MOUTH_MAX_FRAMES` of a large face; before, the bar's
+    total was 120 for the 83 frames of a 4K mouth)."""
+    if progress_factory is None:
+        return plan.mouth_function(model)
+    bars = []
     try:
-        return plan.mouth_function(model,
-                                   progress=lift_bar.update if lift_bar is not None else None)
+        return plan.mouth_function(
+            model, progress=lambda n: bars[0].update(n),
+            on_frames=lambda total: bars.append(progress_factory("mouth texture", total)))
     finally:
-        if lift_bar is not None:
-            lift_bar.close()
+        for bar in bars:
+            bar.close()
 
 
 def _check_outputs(out, *, video_options, save_track, meshes_dir, overwrite: bool,

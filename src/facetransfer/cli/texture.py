@@ -14,6 +14,7 @@
 from __future__ import annotations
 
 import argparse
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -154,6 +155,7 @@ def cmd_lift(args: argparse.Namespace) -> int:
     if hasattr(track, "warn_other_video"):    # a tracker's track (a truth file names none)
         track.warn_other_video(args.video, "the texture is lifted through another face's "
                                "motion")
+    _warn_performance(track, args.track)
     n = int(track.scale.shape[0])
     used = (n + args.step - 1) // args.step
     if fn_out is not None:
@@ -180,6 +182,20 @@ def cmd_lift(args: argparse.Namespace) -> int:
         msg += f" and {fn_out} (texture function, k={args.k})"
     print(msg)
     return 0
+
+
+def _warn_performance(track, path) -> None:
+    """A warning where the track file ``path`` is a performance a transfer made
+    (:attr:`facetransfer.track.Track.made_by`, ``transfer --save-track``): its meshes are what
+    the transfer drew into its output, not the face of the clip it names (the target), so the
+    target's frames lifted through it put its skin on expressions it does not make."""
+    made = getattr(track, "made_by", "")
+    if made:
+        logging.getLogger(__name__).warning(
+            "track %s is a performance made by %s (--save-track), not a track of %s: lifted "
+            "from that clip the texture follows expressions its face does not make (lift the "
+            "transfer's output video through it, or give the clip's own track)", path, made,
+            Path(str(track.source)).name if track.source else "the clip it names")
 
 
 def _check_function_memory(used: int, size: int, step: int) -> None:

@@ -400,7 +400,8 @@ def mouth_texture_function(model, frames, track, topo: MeshTopology | None = Non
                            frame_index: np.ndarray | None = None, tex_size: int | str = 256,
                            step: int = 1, max_frames: int = MOUTH_MAX_FRAMES, k: int = 4,
                            kernel: str = "inverse", bandwidth: float | None = None,
-                           progress: Callable[[int], None] | None = None) -> MouthFunction:
+                           progress: Callable[[int], None] | None = None,
+                           on_frames: Callable[[int], None] | None = None) -> MouthFunction:
     """Lift the mouth source's frames into a performance-driven texture function (§6).
 
     §6: "A simple performance-driven texture function can be obtained with the weighted sum of
@@ -408,11 +409,10 @@ def mouth_texture_function(model, frames, track, topo: MeshTopology | None = Non
     closed as in :func:`close_mouth`) is posed with its camera (Eq. (7)) and a UV texture is
     lifted from the frame (:func:`facetransfer.texture.lift_uv_texture`, texels weighted by
     visibility and obliqueness); the textures and the frames' attribute vectors make a
-    :class:`~facetransfer.texture.TextureFunction` with ``k`` neighbours and a Gaussian kernel.
+    :class:`~facetransfer.texture.TextureFunction` with ``k`` neighbours and ``kernel``.
 
-    Memory: the lifted textures are float32, ``16 T²`` bytes per frame, so at most
-    ``max_frames`` frames (default :data:`MOUTH_MAX_FRAMES` = 120, about 126 MB at T = 256) are
-    lifted, evenly spaced over the usable ones (every ``step``-th, face not lost).
+    Memory: float32 textures, ``16 T²`` bytes a frame: at most ``max_frames`` frames (default
+    :data:`MOUTH_MAX_FRAMES` = 120, ~126 MB at T = 256), evenly spaced over the usable ones.
     ``tex_size="auto"`` lifts only the mouth's square of the UV layout (:func:`mouth_layout`)
     at a side that follows the face's size in the frames (a texel per screen pixel, up to
     :data:`MOUTH_MAX_TEX`), as float16 (8 bytes a texel), within :data:`MOUTH_MAX_BYTES`.
@@ -439,7 +439,8 @@ def mouth_texture_function(model, frames, track, topo: MeshTopology | None = Non
     k : int
         Neighbours of the texture function.
     progress : callable(int), optional
-        Called with 1 after each lifted frame.
+        Called with 1 after each lifted frame; ``on_frames`` first with their count (fewer
+        than ``max_frames`` where ``"auto"`` keeps within :data:`MOUTH_MAX_BYTES`).
 
     Returns
     -------
@@ -448,7 +449,7 @@ def mouth_texture_function(model, frames, track, topo: MeshTopology | None = Non
     Raises
     ------
     RewriteError
-        No UVs, no attribute mode, bad ``step``/``max_frames``, or no usable frame.
+        No UVs, no attribute mode, bad ``step``/``max_frames``/``tex_size``, no usable frame.
 
     References
     ----------
@@ -467,6 +468,8 @@ def mouth_texture_function(model, frames, track, topo: MeshTopology | None = Non
             raise RewriteError(f"{name} must be an integer >= 1, got {val!r}")
     idx, rows = _mouth_rows(track, len(frames), frame_index, int(step), int(max_frames))
     rows, uvs, T, dtype = _lift_layout(model, track, topo, uvs, rows, tex_size)
+    if on_frames is not None:
+        on_frames(int(rows.size))
     textures, weights, attrs = _lift_mouth_textures(model, frames, track, topo, uvs, idx, rows,
                                                     T, progress, dtype)
     log.info("mouth texture function: %d frames lifted at %dx%d", rows.size, T, T)
@@ -493,7 +496,7 @@ def timeline_mouth_function(model, frames, track, index: np.ndarray, n: int,
     """:func:`mouth_texture_function` of a mouth source resampled to a new timeline: row ``i``
     (< ``n``) of ``track`` is the pose and weights shown at output frame ``i``, whose frame is
     ``frames[index[i]]`` (``kwargs``: ``tex_size``, ``step``, ``max_frames``, ``k``,
-    ``progress``)."""
+    ``progress``, ``on_frames``)."""
 
     return mouth_texture_function(model, frames, take_frames(track, np.arange(n)), topo,
                                   frame_index=np.asarray(index)[:n], **kwargs)

@@ -272,7 +272,7 @@ class Track:
         if self.source_facts is not None and not isinstance(self.source_facts, SourceFacts):
             raise TrackError(f"track source_facts must be a SourceFacts, got "
                              f"{type(self.source_facts).__name__}")
-        made = str(self.made_by)
+        made = "" if self.made_by is None else str(self.made_by)   # None: a clip's, not "None"
         if len(made) > MADE_BY_LONGEST or not made.isprintable():
             raise TrackError(f"track made_by must be a line of at most {MADE_BY_LONGEST} "
                              f"characters, got {made[:40]!r}")
