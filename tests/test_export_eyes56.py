@@ -85,3 +85,35 @@ def test_lids_that_cross_at_eyeblink_1_keep_the_pages_threshold(arkit_model, mak
     track0, _, _ = make_arkit_track(arkit_model, n_frames=2, identity=0)
     np.testing.assert_array_equal(shut_gaps(arkit_model, identity_rig(track0, arkit_model)),
                                   LID_SHADE[0])
+
+
+def test_an_open_eyeball_is_not_hidden_by_its_socket_seen_from_the_front(arkit_model,
+                                                                        make_arkit_track):
+    """eyesock56: the socket's cone (apex 1.2 hole widths behind) passed in front of an open
+    eyeball at its corners, where the sphere curves back behind the cone's walls: 5 % of the
+    eyeball's surface that the skin leaves in view from the front (1.4 % of its picture on
+    driving_d6's person). With the apex 2.5 widths behind (the page's sockets too:
+    viewer.CAVITY_DEPTH, one constant), about 1 %. Points on each sphere's front half, cast
+    toward a camera in front (+z): of those no skin triangle hides, at most 2.5 % behind the
+    cone."""
+    from facetransfer.export.common import identity_rig
+    from facetransfer.export.gltf_eyes import eye_placement, socket_cones
+    from facetransfer.export.viewer import cavity_loops
+
+    from test_export_teeth import _rays_hit
+
+    track, _, _ = make_arkit_track(arkit_model, n_frames=2, identity=1)
+    rig = identity_rig(track, arkit_model)
+    P, fan, _ = socket_cones(arkit_model, rig.neutral, rig.deltas)
+    assert {d for _, d in cavity_loops(arkit_model)[1:]} == {2.5}   # the page's the same
+    V, F = np.asarray(rig.neutral, np.float64), np.asarray(arkit_model.faces)
+    i = np.arange(3000) + 0.5
+    z, phi = 1 - 2 * i / 3000, np.pi * (1 + 5 ** 0.5) * i
+    S = np.stack([np.sqrt(1 - z * z) * np.cos(phi), np.sqrt(1 - z * z) * np.sin(phi), z], 1)
+    front = np.array([0.0, 0.0, 1.0])
+    for c, r in zip(*eye_placement(arkit_model, rig.neutral)):
+        pts = c + r * S[S[:, 2] > 0]
+        near = F[np.linalg.norm(V[F].mean(axis=1) - c, axis=1) < 3 * r]
+        seen = pts[~_rays_hit(pts, V, near, front)]
+        assert len(seen) > 100
+        assert _rays_hit(seen, P.astype(np.float64), fan, front).mean() <= 0.025
