@@ -56,7 +56,7 @@ from .track.gaze import CORNER_INDEX, EYE_RADIUS, activation_gaze, eye_model, ga
 __all__ = ["PALETTE", "SKIN", "SCLERA", "IRIS", "LIMBUS", "PUPIL", "CAVITY", "TEETH",
            "CAVITY_BACK", "IRIS_RIM", "IRIS_RADIUS", "PUPIL_RADIUS",
            "TEETH_SHOW", "SHUT", "SHUT_LINE", "LID_PAIRS", "LID_SHADE", "PuppetFace",
-           "puppet_face", "arkit_activations", "track_gaze", "lid_light", "paint_face",
+           "puppet_face", "arkit_activations", "track_gaze", "lid_gaps", "lid_light", "paint_face",
            "preview_face", "draw_face"]
 
 # PALETTE (the two previews' colours, the view page's too, and the mouth's inside a rewrite
@@ -265,18 +265,26 @@ def paint_face(image: np.ndarray, raster, V: np.ndarray, camera, face: PuppetFac
         _paint_mouth(image, ys[m], xs[m], tid[m], raster.bary[ys[m], xs[m]], V, face)
 
 
+def lid_gaps(points68: np.ndarray) -> np.ndarray:
+    """``(..., 2)``, the right eye's and the left's lid gap of iBUG-68 landmark vertices
+    ``points68`` ``(..., 68, 3)`` (any leading axes: frames): the mean of :data:`LID_PAIRS`'
+    distances over the eye's corner distance, unsigned (:data:`LID_SHADE`'s measure)."""
+    P = np.asarray(points68, np.float64)
+    out = []
+    for (o, i), pairs in zip(CORNER_INDEX, LID_PAIRS):
+        gap = np.mean([np.linalg.norm(P[..., u, :] - P[..., lo, :], axis=-1) for u, lo in pairs],
+                      axis=0)
+        out.append(gap / np.maximum(np.linalg.norm(P[..., o, :] - P[..., i, :], axis=-1), 1e-12))
+    return np.stack(out, axis=-1)
+
+
 def lid_light(points68: np.ndarray) -> np.ndarray:
     """``(2,)``, the right eye's and the left's: how much its eyeball is lit as its lids close,
-    ``smoothstep(LID_SHADE, gap)`` of the lid gap (:data:`LID_SHADE`) of a face's iBUG-68
-    landmark vertices ``points68`` (68, 3): 1 open, 0 shut (the ``view`` page's shade)."""
-    P = np.asarray(points68, np.float64)
-    out = np.zeros(2)
-    for e, ((o, i), pairs) in enumerate(zip(CORNER_INDEX, LID_PAIRS)):
-        gap = np.mean([np.linalg.norm(P[u] - P[lo]) for u, lo in pairs])
-        u = np.clip((gap / max(np.linalg.norm(P[o] - P[i]), 1e-12) - LID_SHADE[0])
-                    / (LID_SHADE[1] - LID_SHADE[0]), 0.0, 1.0)
-        out[e] = u * u * (3.0 - 2.0 * u)
-    return out
+    ``smoothstep(LID_SHADE, gap)`` of the lid gap (:func:`lid_gaps`, :data:`LID_SHADE`) of a
+    face's iBUG-68 landmark vertices ``points68`` (68, 3): 1 open, 0 shut (the ``view`` page's
+    shade)."""
+    u = np.clip((lid_gaps(points68) - LID_SHADE[0]) / (LID_SHADE[1] - LID_SHADE[0]), 0.0, 1.0)
+    return u * u * (3.0 - 2.0 * u)
 
 
 def _shut(count: np.ndarray, V: np.ndarray, camera, face: PuppetFace) -> np.ndarray:

@@ -20,7 +20,8 @@ and eyelid55). So, as the ``view`` page does (a closed lid hides the eye, a dark
 behind), each eye hole is closed behind by a dark cone (:func:`socket_cones`, in
 :func:`socket_colour`), and each eyeball is hidden while its lids are shut
 (:func:`eyes_shown`: the page's lid gap at or under the lower end of
-:data:`facetransfer.puppet_face.LID_SHADE`), a ``scale`` key a frame (STEP) of the radius or
+:data:`facetransfer.puppet_face.LID_SHADE`, or under a face's own gap at ``eyeBlink`` 1 where its
+lids stop wider apart: :func:`shut_gaps`), a ``scale`` key a frame (STEP) of the radius or
 :data:`SHUT_SCALE` of it: the slit of shut lids shows the socket, a dark line. Nodes
 ``eyeRight`` and ``eyeLeft``: the subject's own, as ARKit names them. The USD export
 (:mod:`facetransfer.export.usd`) has the same eyeballs, bound to joints of those names below its
@@ -31,14 +32,22 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["EYE_NODES", "SHUT_SCALE", "eye_placement", "eye_rotations", "eyeball_mesh",
-           "track_eye_gaze", "eyes_shown", "eye_scales", "socket_cones", "socket_colour"]
+__all__ = ["EYE_NODES", "SHUT_SCALE", "SHUT_MARGIN", "eye_placement", "eye_rotations",
+           "eyeball_mesh", "track_eye_gaze", "shut_gaps", "eyes_shown", "eye_scales",
+           "socket_cones", "socket_colour"]
 
 #: The eye nodes' names, in :data:`facetransfer.track.gaze.EYES` order.
 EYE_NODES = ("eyeRight", "eyeLeft")
 #: An eyeball's scale while its lids are shut, a share of its radius: a point at its centre,
 #: behind the socket (not 0, which leaves a player's normal matrix singular).
 SHUT_SCALE = 1e-4
+#: How far above a face's own lid gap at ``eyeBlink`` 1 its eyes still count as shut, in eye
+#: widths (:func:`shut_gaps`; never under ``LID_SHADE[0]``, 0.08): about 0.08 mm, an eyeBlink a
+#: few hundredths under 1. The default model's lids stop 0.066-0.075 apart there, so its rule
+#: stays 0.08. Not more: the test model's identity 1 (0.098 at eyeBlink 1) narrows its lids to
+#: 0.100-0.103 at half blinks with other shapes, which the page still lights at 11-13 %
+#: (BENCHMARKS.md, fifty-sixth session, review56a).
+SHUT_MARGIN = 0.003
 #: Rings of the sphere between its poles and vertices about each ring.
 _RINGS, _AROUND = 24, 32
 
@@ -83,15 +92,36 @@ def track_eye_gaze(track, activations: np.ndarray) -> np.ndarray:
     return activation_gaze(activations) if recorded is None else recorded
 
 
+def shut_gaps(model, rig) -> np.ndarray:
+    """``(2,)``, each eye's (:data:`EYE_NODES` order) lid gap at and below which its eyeball is
+    hidden: the larger of ``LID_SHADE[0]`` (0.08 eye widths, the ``view`` page's and the
+    puppet's rule) and the face's own gap at ``eyeBlink`` 1
+    (:func:`facetransfer.puppet_face.lid_gaps` of the rig at both eyeBlinks 1) plus
+    :data:`SHUT_MARGIN`, at most ``LID_SHADE[1]``: a face whose lids stop wider apart (the test
+    model's identity 1: 0.098) hides its shut eyes too. Lids that cross at ``eyeBlink`` 1
+    (upper below lower) pass a gap of 0 on the way: 0.08 stands."""
+    from ..arkit import ARKIT_NAMES
+    from ..puppet_face import LID_PAIRS, LID_SHADE, lid_gaps
+
+    lm = np.asarray(model.landmarks, np.int64)
+    blink = [ARKIT_NAMES.index(n) for n in ("eyeBlinkLeft", "eyeBlinkRight")]
+    D = np.asarray(rig.deltas, np.float64)
+    P = np.asarray(rig.neutral, np.float64)[lm] + D[blink][:, lm].sum(axis=0)
+    gap = lid_gaps(P)
+    apart = np.array([np.mean([P[u, 1] - P[lo, 1] for u, lo in pairs]) > 0 for pairs in LID_PAIRS])
+    own = np.where(apart, np.minimum(gap + SHUT_MARGIN, LID_SHADE[1]), 0.0)
+    return np.maximum(LID_SHADE[0], own)
+
+
 def eyes_shown(model, rig, activations: np.ndarray) -> np.ndarray:
     """Whether each eyeball is drawn, ``(F, 2) bool`` (:data:`EYE_NODES` order), per frame of
     ``activations`` ``(F, 52)`` on the exported face (``rig``: its neutral and the 52 deltas, as
-    a player adds them): the ``view`` page's and the puppet's rule,
-    :func:`facetransfer.puppet_face.lid_light` of the frame's iBUG-68 landmark vertices above
-    0, i.e. a lid gap (the mean of :data:`facetransfer.puppet_face.LID_PAIRS`' distances over
-    the eye's corner distance) above ``LID_SHADE[0]`` (0.08; the default model's lids stop
-    0.066-0.075 apart at eyeBlink 1). All shown for a model without landmarks."""
-    from ..puppet_face import lid_light
+    a player adds them): its lid gap (:func:`facetransfer.puppet_face.lid_gaps` of the frame's
+    iBUG-68 landmark vertices, the ``view`` page's and the puppet's measure) above
+    :func:`shut_gaps` (0.08, ``LID_SHADE[0]``, for the default model, whose lids stop 0.066-0.075
+    apart at eyeBlink 1; higher for a face whose shut lids stop wider apart). All shown for a
+    model without landmarks."""
+    from ..puppet_face import lid_gaps
 
     a = np.asarray(activations, np.float64)
     if model.landmarks is None:
@@ -99,7 +129,7 @@ def eyes_shown(model, rig, activations: np.ndarray) -> np.ndarray:
     lm = np.asarray(model.landmarks, np.int64)
     P = np.asarray(rig.neutral, np.float64)[lm] + np.einsum(
         "fj,jlc->flc", a, np.asarray(rig.deltas, np.float64)[:, lm])
-    return np.array([lid_light(p) > 0.0 for p in P]).reshape(len(a), 2)
+    return lid_gaps(P) > shut_gaps(model, rig)
 
 
 def eye_scales(shown: np.ndarray, radii) -> np.ndarray:

@@ -204,9 +204,13 @@ def eye_data(model, neutral: np.ndarray, names: list) -> dict | None:
 
 
 #: How far behind its hole each cavity's apex lies, in widths (x extent) of the hole: the mouth
-#: bag (3.2 cm behind the inner lips of the ICT face) and the eye sockets (2.9 cm behind the lid
-#: margins; the eyeballs' centres sit 0.7 cm behind them).
-CAVITY_DEPTH = {"mouth": 0.7, "eye": 1.2}
+#: bag (3.2 cm behind the inner lips of the ICT face) and the eye sockets (6.0 cm behind the lid
+#: margins; the eyeballs' centres sit 0.7 cm behind them, radius 1.04 cm). The sockets' apex was
+#: 1.2 widths (2.9 cm): the cone's walls then passed in front of an open eyeball at its corners,
+#: 1.4 % of its picture from the front (0.025 cm² an eye, 3 % from 20° above or below); at 2.5,
+#: 0.3 %, and no cone point shows but through its eye hole from the front, 30° above or below,
+#: ±45° or ±90° (BENCHMARKS.md, fifty-sixth session, review56a).
+CAVITY_DEPTH = {"mouth": 0.7, "eye": 2.5}
 
 
 def cavity_loops(model) -> list[tuple[np.ndarray, float]]:
