@@ -551,6 +551,20 @@ def test_usd_eyeballs_are_skinned_to_eye_joints_that_turn_with_the_gaze(case, tm
         np.testing.assert_allclose(np.array(pts, np.float64)[front], want, atol=2e-4)
 
 
+def _usd_posed(prim, w) -> np.ndarray:
+    """A USD mesh ``prim``'s points (n, 3) posed by its own ARKit-named BlendShape prims at
+    weights ``w`` (52,): sparse offsets where a shape names its points, else every point."""
+    from pxr import UsdGeom, UsdSkel
+
+    pts = np.array(UsdGeom.Mesh(prim).GetPointsAttr().Get(), np.float64)
+    for name, x in zip(ARKIT_NAMES, w):
+        bs = UsdSkel.BlendShape(prim.GetChild(name))
+        idx = bs.GetPointIndicesAttr().Get()
+        pts[np.arange(len(pts)) if idx is None else np.array(idx)] += x * np.array(
+            bs.GetOffsetsAttr().Get(), np.float64)
+    return pts
+
+
 def test_usd_mouth_inside_follows_the_lips(case, tmp_path):
     """The USD's lips' gap was open onto what is behind the head, as the glb's was. Now a mesh
     ``/Face/mouthInside`` on the head joint closes it, a cone whose 52 blend shapes move its
@@ -558,15 +572,6 @@ def test_usd_mouth_inside_follows_the_lips(case, tmp_path):
     point of the face's boundary, in order, and the cone's tip lies behind them."""
     pytest.importorskip("pxr", reason="usd-core is not installed (extra [usd])")
     from pxr import Usd, UsdGeom, UsdSkel
-
-    def posed(prim, w):
-        pts = np.array(UsdGeom.Mesh(prim).GetPointsAttr().Get(), np.float64)
-        for name, x in zip(ARKIT_NAMES, w):
-            bs = UsdSkel.BlendShape(prim.GetChild(name))
-            idx = bs.GetPointIndicesAttr().Get()
-            rows = np.arange(len(pts)) if idx is None else np.array(idx)
-            pts[rows] += x * np.array(bs.GetOffsetsAttr().Get(), np.float64)
-        return pts
 
     model, track, a, _ = case
     stage = Usd.Stage.Open(str(export_track(track, "usd", tmp_path / "f.usda", model=model)))
@@ -579,7 +584,7 @@ def test_usd_mouth_inside_follows_the_lips(case, tmp_path):
         for u, v in ((tri[0], tri[1]), (tri[1], tri[2]), (tri[2], tri[0])):
             edges[frozenset((int(u), int(v)))] = edges.get(frozenset((int(u), int(v))), 0) + 1
     for w in (np.zeros(52), a[5].astype(np.float64)):
-        V, C = posed(face, w), posed(inside, w)
+        V, C = _usd_posed(face, w), _usd_posed(inside, w)
         k = len(C) - 1
         d = np.linalg.norm(V[None] - C[:k, None], axis=2)
         rim = d.argmin(axis=1)
@@ -601,15 +606,6 @@ def test_usd_eye_sockets_follow_the_lids_and_shut_eyes_are_hidden(blinks, tmp_pa
     from facetransfer.io.exr import srgb_decode
     from facetransfer.palette import CAVITY_BACK, PALETTE
 
-    def posed(prim, w):
-        pts = np.array(UsdGeom.Mesh(prim).GetPointsAttr().Get(), np.float64)
-        for name, x in zip(ARKIT_NAMES, w):
-            bs = UsdSkel.BlendShape(prim.GetChild(name))
-            idx = bs.GetPointIndicesAttr().Get()
-            pts[np.arange(len(pts)) if idx is None else np.array(idx)] += x * np.array(
-                bs.GetOffsetsAttr().Get(), np.float64)
-        return pts
-
     model, track, b = blinks
     stage = Usd.Stage.Open(str(export_track(track, "usd", tmp_path / "f.usda", model=model)))
     face, sock = stage.GetPrimAtPath("/Face/Mesh"), stage.GetPrimAtPath("/Face/eyeSockets")
@@ -622,14 +618,14 @@ def test_usd_eye_sockets_follow_the_lids_and_shut_eyes_are_hidden(blinks, tmp_pa
                             .reshape(-1, 3))
     fan = np.array(UsdGeom.Mesh(sock).GetFaceVertexIndicesAttr().Get()).reshape(-1, 3)
     for w in (np.zeros(52), b[1].astype(np.float64)):
-        V = posed(face, w)
-        assert len(_cones_on_the_holes(V, posed(sock, w), fan, holes, 1e-4)) == 2   # cm
+        V = _usd_posed(face, w)
+        assert len(_cones_on_the_holes(V, _usd_posed(sock, w), fan, holes, 1e-4)) == 2   # cm
     anim = UsdSkel.Animation(stage.GetPrimAtPath("/Face/Skel/Anim"))
     cache = UsdSkel.Cache()
     cache.Populate(UsdSkel.Root(stage.GetPrimAtPath("/Face")), Usd.PrimDefaultPredicate)
     skq = cache.GetSkelQuery(UsdSkel.Skeleton(stage.GetPrimAtPath("/Face/Skel")))
     for k in range(len(b)):
-        shut = _lid_gaps(model, posed(face, b[k].astype(np.float64))) <= SHUT_GAP
+        shut = _lid_gaps(model, _usd_posed(face, b[k].astype(np.float64))) <= SHUT_GAP
         scales = np.array(anim.GetScalesAttr().Get(Usd.TimeCode(k)), np.float64)
         assert np.all(scales[0] == 1.0) and np.all(scales[1:][~shut] == 1.0)
         assert np.all(scales[1:][shut] < 1e-3)
