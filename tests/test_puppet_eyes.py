@@ -311,3 +311,25 @@ def test_closing_lids_darken_the_puppets_eyeball_as_the_pages(arkit_model):
         assert _sclera(px).sum() == 0
     rest = arkit_model.synthesize(_track(_acts(), arkit_model).weights_at(0))
     np.testing.assert_array_equal(lid_light(rest[np.asarray(arkit_model.landmarks)]), [1, 1])
+
+
+def test_the_preview_hides_the_shut_eye_of_a_face_whose_lids_stay_apart(arkit_model):
+    """pageeyes56: the test model's identity 1 stops its lids 0.098 eye widths apart at
+    eyeBlink 1; `render`'s preview (preview_face, draw_face) lit its eyeballs there at 6-9 %
+    (lid_light from the fixed 0.08) through the fill the lids leave, where the exports hide
+    them. Now the face's own shut gap (puppet_face.face_shut_gaps) shuts them: the fill is the
+    lids' line, the preview's grey skin darkened (before: the eyeball's sclera and iris,
+    coloured)."""
+    from facetransfer.arkit import activations_to_weights
+    from facetransfer.puppet_face import preview_face, puppet_face
+    from facetransfer.topology import mesh_topology
+
+    w = {"identity": arkit_model.factors[arkit_model.mode_index("identity")][1],
+         "expression": activations_to_weights(arkit_model, _acts(eyeBlinkLeft=1.0,
+                                                                 eyeBlinkRight=1.0))[0]}
+    res = preview_face(arkit_model, w, size=(640, 480))
+    kind = puppet_face(arkit_model, mesh_topology(arkit_model, lips=False)).kind
+    fill = np.isin(kind[res.raster.tri_id + 1], (0, 1))
+    assert fill.sum() > 100                            # the lids leave a fill wider than SHUT
+    px = res.image[fill].astype(np.int64)
+    assert np.all(px.max(axis=1) == px.min(axis=1))  # the preview's grey skin, no eyeball

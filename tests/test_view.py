@@ -636,7 +636,9 @@ def test_the_pages_iris_and_pupil_are_the_puppets(pages):
 def test_the_pages_lid_shade_is_the_puppets(arkit_model, pages):
     """The page's shade of each eyeball as its lids close is the puppet's
     (puppet_face.lid_light of the face the page shows), at a half blink, eyeBlink 0.8 and a
-    blink: one rule for both (LID_PAIRS, LID_SHADE in puppet_face)."""
+    blink: one rule for both (LID_PAIRS, LID_SHADE in puppet_face); and from the face's own
+    shut gap (puppet_face.shut_gaps_at_blink, the exports' rule) where its lids stay apart at
+    eyeBlink 1."""
     from facetransfer.arkit import ARKIT_NAMES, activations_to_weights
     from facetransfer.puppet_face import lid_light
 
@@ -649,6 +651,25 @@ def test_the_pages_lid_shade_is_the_puppets(arkit_model, pages):
         V = arkit_model.synthesize(w)
         want = lid_light(V[np.asarray(arkit_model.landmarks)])
         np.testing.assert_allclose([d["lit"] for d in drawn], want, atol=2e-3)
+    # pageeyes56: the track's page shows identity 1, whose lids stop 0.098 eye widths apart at
+    # eyeBlink 1: its shade ramps from that face's own shut gap (puppet_face.face_shut_gaps, the
+    # exports' gltf_eyes.shut_gaps), as the puppet's, to 1e-6 (before: from 0.08, the shut eye
+    # drawn at 6-9 % light)
+    from facetransfer.puppet_face import LID_SHADE, face_shut_gaps
+
+    _, track_page, track, acts = pages
+    shut = face_shut_gaps(arkit_model, track.weights_at(0))
+    assert np.all(shut > LID_SHADE[0])
+    for blink in (0.9, 1.0):
+        drawn = _drawn_eyes(track_page, f"frame=0&eyeBlinkLeft={blink}&eyeBlinkRight={blink}")
+        a = np.array(acts[:1], np.float32)
+        a[0, [ARKIT_NAMES.index("eyeBlinkLeft"), ARKIT_NAMES.index("eyeBlinkRight")]] = blink
+        V = arkit_model.synthesize({**track.weights_at(0),
+                                    "expression": activations_to_weights(arkit_model, a)[0]})
+        np.testing.assert_allclose([d["shut_gap"] for d in drawn], shut, rtol=0, atol=1e-6)
+        want = lid_light(V[np.asarray(arkit_model.landmarks)], shut)
+        np.testing.assert_allclose([d["lit"] for d in drawn], want, atol=2e-3)
+        assert [d["visible"] for d in drawn] == list(want > 0)
 
 
 def _painted(page: Path) -> dict:

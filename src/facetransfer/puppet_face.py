@@ -25,8 +25,10 @@ lips occlude them as they occlude any surface):
   blink and its lips at rest do not quite meet) is shut, its
   pixels the skin darkened by :data:`SHUT_LINE` (the lids' or the lips' line): a blink hides
   the eyeball, a mouth at rest shows no cavity. As on the ``view`` page, the lids closing
-  darken the eyeball by their gap (:func:`lid_light`, :data:`LID_SHADE`); at a gap of
-  ``LID_SHADE[0]`` the eye is shut.
+  darken the eyeball by their gap (:func:`lid_light`, :data:`LID_SHADE`); at and under the
+  face's shut gap (:func:`shut_gaps_at_blink`: ``LID_SHADE[0]``, or a little over the face's own
+  gap at ``eyeBlink`` 1 where its lids stop wider apart) the eye is shut, as the ``view`` page
+  and the exported glb and USD hide it.
 
 The colours are :data:`PALETTE`'s, the ``view`` page's too (one palette for both previews).
 
@@ -55,8 +57,9 @@ from .track.gaze import CORNER_INDEX, EYE_RADIUS, activation_gaze, eye_model, ga
 
 __all__ = ["PALETTE", "SKIN", "SCLERA", "IRIS", "LIMBUS", "PUPIL", "CAVITY", "TEETH",
            "CAVITY_BACK", "IRIS_RIM", "IRIS_RADIUS", "PUPIL_RADIUS",
-           "TEETH_SHOW", "SHUT", "SHUT_LINE", "LID_PAIRS", "LID_SHADE", "PuppetFace",
-           "puppet_face", "arkit_activations", "track_gaze", "lid_gaps", "lid_light", "paint_face",
+           "TEETH_SHOW", "SHUT", "SHUT_LINE", "LID_PAIRS", "LID_SHADE", "SHUT_MARGIN",
+           "PuppetFace", "puppet_face", "arkit_activations", "track_gaze", "lid_gaps",
+           "shut_gaps_at_blink", "face_shut_gaps", "lid_light", "paint_face",
            "preview_face", "draw_face"]
 
 # PALETTE (the two previews' colours, the view page's too, and the mouth's inside a rewrite
@@ -105,6 +108,13 @@ LID_PAIRS = (((37, 41), (38, 40)), ((43, 47), (44, 46)))
 #: looking down, and stop 0.066 apart at ``eyeBlink`` 1 (a 1.8 mm slit in the mesh), where the
 #: eyeball must not show.
 LID_SHADE = (0.08, 0.18)
+#: How far above a face's own lid gap at ``eyeBlink`` 1 its eyes still count as shut, in eye
+#: widths (:func:`shut_gaps_at_blink`; never under ``LID_SHADE[0]``, 0.08): about 0.08 mm, an
+#: eyeBlink a few hundredths under 1. The default model's lids stop 0.066-0.075 apart there, so
+#: its rule stays 0.08. Not more: the test model's identity 1 (0.098 at eyeBlink 1) narrows its
+#: lids to 0.100-0.103 at half blinks with other shapes, which the page still lights at 11-13 %
+#: (BENCHMARKS.md, fifty-sixth session, review56a). Was ``export.gltf_eyes.SHUT_MARGIN``.
+SHUT_MARGIN = 0.003
 #: What the lids' fills are painted with, by :attr:`PuppetFace.kind`.
 _RIGHT, _LEFT, _MOUTH = 0, 1, 2
 #: The ball's Lambert term: ``_EYE_AMBIENT + (1 - _EYE_AMBIENT) n_z`` (its normal toward the
@@ -138,6 +148,9 @@ class PuppetFace:
     rim : (m,) int64
         The fills' vertices but their centres (the eye and mouth loops): their projections'
         box holds every pixel of the fills.
+    shut : (2,) float
+        Each eye's shut gap (:func:`face_shut_gaps` of the face drawn): :func:`lid_light`'s
+        lower end, at and under which the eyeball is hidden.
     """
 
     faces: np.ndarray
@@ -147,6 +160,7 @@ class PuppetFace:
     gaze: np.ndarray | None
     mouth: tuple
     rim: np.ndarray
+    shut: tuple = (LID_SHADE[0], LID_SHADE[0])
 
     def vertices(self, V: np.ndarray) -> np.ndarray:
         """``V`` (n_closed, 3), a frame's closed mesh, with each eye loop's centre appended."""
@@ -157,7 +171,7 @@ class PuppetFace:
 
 
 def puppet_face(model, topo, activations: np.ndarray | None = None, *,
-                gaze: np.ndarray | None = None) -> PuppetFace:
+                gaze: np.ndarray | None = None, weights=None) -> PuppetFace:
     """The solid head of ``model``'s topology ``topo`` (:func:`facetransfer.topology.
     mesh_topology`) and what its fills show (module docstring).
 
@@ -167,7 +181,9 @@ def puppet_face(model, topo, activations: np.ndarray | None = None, *,
     the eyes frame by frame; else ``activations`` (F, 52), ARKit's in
     :data:`facetransfer.arkit.ARKIT_NAMES` order (:func:`arkit_activations` of a track), by
     their eyeLook* curves (:func:`facetransfer.track.gaze.activation_gaze`); neither: the eyes
-    look straight ahead.
+    look straight ahead. ``weights`` (mode -> (r_k,)): the drawn face's, whose identity sets
+    each eye's shut gap (:func:`face_shut_gaps`; its expression is not read); None: the fixed
+    ``LID_SHADE[0]``.
     """
     n_c = topo.n_closed
     faces = [topo.faces]
@@ -188,7 +204,8 @@ def puppet_face(model, topo, activations: np.ndarray | None = None, *,
     gaze = None if gaze is None else np.asarray(gaze, np.float64)
     rim = np.concatenate([np.zeros(0, np.int64), topo.mouth_loop, *topo.eye_loops])
     return PuppetFace(faces, kind, tuple(topo.eye_loops), lm, gaze,
-                      (fan.start, int(topo.mouth_loop.size)), rim.astype(np.int64))
+                      (fan.start, int(topo.mouth_loop.size)), rim.astype(np.int64),
+                      tuple(face_shut_gaps(model, weights)))
 
 
 def arkit_activations(track) -> np.ndarray | None:
@@ -252,7 +269,7 @@ def paint_face(image: np.ndarray, raster, V: np.ndarray, camera, face: PuppetFac
     k = kind[ys, xs]
     tid = tid[ys, xs]
     ys, xs = ys + y0, xs + x0
-    lit = np.ones(2) if face.landmarks is None else lid_light(V[face.landmarks])
+    lit = np.ones(2) if face.landmarks is None else lid_light(V[face.landmarks], face.shut)
     shut = _shut(np.bincount(k, minlength=3), V, camera, face)
     shut = (shut | np.append(lit <= 0.0, False))[k]
     if shut.any():   # the lids or the lips meeting: a line darker than the skin
@@ -278,12 +295,54 @@ def lid_gaps(points68: np.ndarray) -> np.ndarray:
     return np.stack(out, axis=-1)
 
 
-def lid_light(points68: np.ndarray) -> np.ndarray:
+def shut_gaps_at_blink(blink68: np.ndarray) -> np.ndarray:
+    """``(..., 2)``, each eye's (right, left) shut gap: the lid gap (:func:`lid_gaps`, eye
+    widths) at and under which its eyeball is hidden, of a face's iBUG-68 landmark vertices
+    with both ``eyeBlink`` shapes at 1, ``blink68`` ``(..., 68, 3)`` (the head's frame, +y up).
+
+    The larger of ``LID_SHADE[0]`` (0.08) and the face's own gap there plus
+    :data:`SHUT_MARGIN`, at most ``LID_SHADE[1]``: a face whose shut lids stop wider apart (the
+    test model's identity 1: 0.098) hides its shut eyes too. Lids that cross at ``eyeBlink`` 1
+    (the upper below the lower on average over :data:`LID_PAIRS`) passed a gap of 0 on the
+    way: 0.08 stands. The one rule of the puppet (:func:`lid_light`), the exported glb and USD
+    (:func:`facetransfer.export.gltf_eyes.shut_gaps`) and the ``view`` page (its ``placeEyes``
+    computes the same of the face its dials show, :func:`facetransfer.export.viewer.eye_data`).
+    """
+    P = np.asarray(blink68, np.float64)
+    gap = lid_gaps(P)
+    apart = np.stack([np.mean([P[..., u, 1] - P[..., lo, 1] for u, lo in pairs], axis=0) > 0
+                      for pairs in LID_PAIRS], axis=-1)
+    own = np.where(apart, np.minimum(gap + SHUT_MARGIN, LID_SHADE[1]), 0.0)
+    return np.maximum(LID_SHADE[0], own)
+
+
+def face_shut_gaps(model, weights) -> np.ndarray:
+    """``(2,)``, :func:`shut_gaps_at_blink` of ``model``'s face of ``weights`` (mode -> (r_k,):
+    its identity; the expression is not read) with both ``eyeBlink`` shapes at 1 (its
+    :func:`facetransfer.arkit.expression_rig` at the landmarks). ``LID_SHADE[0]`` for both eyes
+    where ``weights`` is None or the model has no landmarks or no ARKit shapes (no eyeBlink)."""
+    from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
+
+    if weights is None or model.landmarks is None or not is_arkit_model(model):
+        return np.full(2, LID_SHADE[0])
+    rig = expression_rig(model, weights, vertices=np.asarray(model.landmarks, np.int64))
+    blink = [ARKIT_NAMES.index(n) for n in ("eyeBlinkLeft", "eyeBlinkRight")]
+    D = np.asarray(rig.deltas, np.float64)
+    return shut_gaps_at_blink(np.asarray(rig.neutral, np.float64) + D[blink].sum(axis=0))
+
+
+def lid_light(points68: np.ndarray, shut=None) -> np.ndarray:
     """``(2,)``, the right eye's and the left's: how much its eyeball is lit as its lids close,
-    ``smoothstep(LID_SHADE, gap)`` of the lid gap (:func:`lid_gaps`, :data:`LID_SHADE`) of a
-    face's iBUG-68 landmark vertices ``points68`` (68, 3): 1 open, 0 shut (the ``view`` page's
-    shade)."""
-    u = np.clip((lid_gaps(points68) - LID_SHADE[0]) / (LID_SHADE[1] - LID_SHADE[0]), 0.0, 1.0)
+    ``smoothstep(shut, LID_SHADE[1], gap)`` of the lid gap (:func:`lid_gaps`) of a face's
+    iBUG-68 landmark vertices ``points68`` (68, 3): 1 open, 0 shut (the ``view`` page's shade).
+    ``shut`` (2,): each eye's shut gap (:func:`face_shut_gaps` of the face; None:
+    ``LID_SHADE[0]``, the same light to the bit as before it was per face); where it is
+    ``LID_SHADE[1]`` the light steps from 0 to 1 there."""
+    lo = LID_SHADE[0] if shut is None else np.asarray(shut, np.float64)
+    span = LID_SHADE[1] - lo
+    gap = lid_gaps(points68)
+    u = np.clip((gap - lo) / np.where(span > 0, span, 1.0), 0.0, 1.0)
+    u = np.where(span > 0, u, (gap > lo).astype(np.float64))
     return u * u * (3.0 - 2.0 * u)
 
 
@@ -395,19 +454,20 @@ def preview_face(model, weights, *, size: tuple[int, int] = (640, 480), yaw_deg:
     if is_arkit_model(model):
         acts = weights_to_activations(model, np.asarray(weights["expression"])[None])[0]
     return draw_face(model, mesh_topology(model, lips=False), V, cam, size, activations=acts,
-                     background=background)
+                     background=background, weights=weights)
 
 
 def draw_face(model, topo, V: np.ndarray, camera, size: tuple[int, int], *,
               activations: np.ndarray | None = None, colour=None,
-              background=(255, 255, 255)):
+              background=(255, 255, 255), weights=None):
     """The face ``V`` (n, 3) of ``model`` rendered under ``camera`` into an image of ``size``
     ``(W, H)``, its eye holes and mouth gap closed and painted as the puppet's
     (:func:`paint_face`): :func:`preview_face`'s picture with a camera of the caller's (a
     sheet's tiles share one). ``topo``: :func:`facetransfer.topology.mesh_topology` of the
     model with ``lips=False``; ``activations`` (52,): the face's ARKit activations, which turn
     its eyes (none: they look ahead); ``colour``: the skin's RGB in [0, 1] (default the
-    renderer's grey).
+    renderer's grey); ``weights`` (mode -> (r_k,)): the face's, whose identity sets the eyes'
+    shut gap (:func:`face_shut_gaps`; None: ``LID_SHADE[0]``).
 
     Returns
     -------
@@ -420,7 +480,7 @@ def draw_face(model, topo, V: np.ndarray, camera, size: tuple[int, int], *,
     from .topology import close_mouth
 
     acts = None if activations is None else np.asarray(activations, np.float64).reshape(1, -1)
-    face = puppet_face(model, topo, acts)
+    face = puppet_face(model, topo, acts, weights=weights)
     V = np.asarray(V, dtype=np.float64)
     Vc = face.vertices(close_mouth(V, topo))
     colors = None if colour is None else np.tile(np.asarray(colour, np.float64), (len(Vc), 1))

@@ -401,7 +401,7 @@ def tile_painter(model):
         acts = weights_to_activations(model, np.asarray(weights["expression"])[None])[0] \
             if arkit else None
         return draw_face(model, topo, V, camera, size, activations=acts,
-                         colour=TILE_SKIN).image
+                         colour=TILE_SKIN, weights=weights).image
     return paint
 
 

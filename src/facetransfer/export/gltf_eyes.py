@@ -21,8 +21,9 @@ behind), each eye hole is closed behind by a dark cone (:func:`socket_cones`, in
 :func:`socket_colour`), and each eyeball is hidden while its lids are shut
 (:func:`eyes_shown`: the page's lid gap at or under the lower end of
 :data:`facetransfer.puppet_face.LID_SHADE`, or under a face's own gap at ``eyeBlink`` 1 where its
-lids stop wider apart: :func:`shut_gaps`), a ``scale`` key a frame (STEP) of the radius or
-:data:`SHUT_SCALE` of it: the slit of shut lids shows the socket, a dark line. Nodes
+lids stop wider apart: :func:`shut_gaps`, the puppet's and the page's rule,
+:func:`facetransfer.puppet_face.shut_gaps_at_blink`), a ``scale`` key a frame (STEP) of the
+radius or :data:`SHUT_SCALE` of it: the slit of shut lids shows the socket, a dark line. Nodes
 ``eyeRight`` and ``eyeLeft``: the subject's own, as ARKit names them. The USD export
 (:mod:`facetransfer.export.usd`) has the same eyeballs, bound to joints of those names below its
 ``head`` (their scale in its SkelAnimation), and the same sockets.
@@ -32,7 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["EYE_NODES", "SHUT_SCALE", "SHUT_MARGIN", "eye_placement", "eye_rotations",
+__all__ = ["EYE_NODES", "SHUT_SCALE", "eye_placement", "eye_rotations",
            "eyeball_mesh", "track_eye_gaze", "shut_gaps", "eyes_shown", "eye_scales",
            "socket_cones", "socket_colour"]
 
@@ -41,13 +42,6 @@ EYE_NODES = ("eyeRight", "eyeLeft")
 #: An eyeball's scale while its lids are shut, a share of its radius: a point at its centre,
 #: behind the socket (not 0, which leaves a player's normal matrix singular).
 SHUT_SCALE = 1e-4
-#: How far above a face's own lid gap at ``eyeBlink`` 1 its eyes still count as shut, in eye
-#: widths (:func:`shut_gaps`; never under ``LID_SHADE[0]``, 0.08): about 0.08 mm, an eyeBlink a
-#: few hundredths under 1. The default model's lids stop 0.066-0.075 apart there, so its rule
-#: stays 0.08. Not more: the test model's identity 1 (0.098 at eyeBlink 1) narrows its lids to
-#: 0.100-0.103 at half blinks with other shapes, which the page still lights at 11-13 %
-#: (BENCHMARKS.md, fifty-sixth session, review56a).
-SHUT_MARGIN = 0.003
 #: Rings of the sphere between its poles and vertices about each ring.
 _RINGS, _AROUND = 24, 32
 
@@ -94,23 +88,19 @@ def track_eye_gaze(track, activations: np.ndarray) -> np.ndarray:
 
 def shut_gaps(model, rig) -> np.ndarray:
     """``(2,)``, each eye's (:data:`EYE_NODES` order) lid gap at and below which its eyeball is
-    hidden: the larger of ``LID_SHADE[0]`` (0.08 eye widths, the ``view`` page's and the
-    puppet's rule) and the face's own gap at ``eyeBlink`` 1
-    (:func:`facetransfer.puppet_face.lid_gaps` of the rig at both eyeBlinks 1) plus
-    :data:`SHUT_MARGIN`, at most ``LID_SHADE[1]``: a face whose lids stop wider apart (the test
-    model's identity 1: 0.098) hides its shut eyes too. Lids that cross at ``eyeBlink`` 1
-    (upper below lower) pass a gap of 0 on the way: 0.08 stands."""
+    hidden: :func:`facetransfer.puppet_face.shut_gaps_at_blink` (the puppet's and the ``view``
+    page's rule: the larger of ``LID_SHADE[0]``, 0.08 eye widths, and the face's own gap at
+    ``eyeBlink`` 1 plus ``SHUT_MARGIN``, at most ``LID_SHADE[1]``; lids that cross there keep
+    0.08) of the rig's landmark vertices at both eyeBlinks 1: a face whose lids stop wider apart
+    (the test model's identity 1: 0.098) hides its shut eyes too."""
     from ..arkit import ARKIT_NAMES
-    from ..puppet_face import LID_PAIRS, LID_SHADE, lid_gaps
+    from ..puppet_face import shut_gaps_at_blink
 
     lm = np.asarray(model.landmarks, np.int64)
     blink = [ARKIT_NAMES.index(n) for n in ("eyeBlinkLeft", "eyeBlinkRight")]
     D = np.asarray(rig.deltas, np.float64)
     P = np.asarray(rig.neutral, np.float64)[lm] + D[blink][:, lm].sum(axis=0)
-    gap = lid_gaps(P)
-    apart = np.array([np.mean([P[u, 1] - P[lo, 1] for u, lo in pairs]) > 0 for pairs in LID_PAIRS])
-    own = np.where(apart, np.minimum(gap + SHUT_MARGIN, LID_SHADE[1]), 0.0)
-    return np.maximum(LID_SHADE[0], own)
+    return shut_gaps_at_blink(P)
 
 
 def eyes_shown(model, rig, activations: np.ndarray) -> np.ndarray:

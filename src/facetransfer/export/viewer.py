@@ -44,6 +44,7 @@ import numpy as np
 from ..io.atomic import write_text_atomic
 from ..palette import TEETH_SPAN
 from ..puppet_face import CAVITY_BACK, IRIS_RIM, LID_PAIRS, LID_SHADE, PALETTE, TEETH_SHOW
+from ..puppet_face import SHUT_MARGIN
 from ..puppet_face import IRIS_RADIUS as _IRIS_RADIUS, PUPIL_RADIUS as _PUPIL_RADIUS
 from ..track.gaze import EYE_RADIUS as _EYE_RADIUS
 from ..track.lip_contact import LIP_PAIRS
@@ -140,7 +141,8 @@ IRIS_ANGLE, PUPIL_ANGLE = (float(np.degrees(np.arcsin(r / _EYE_RADIUS)))
                            for r in (_IRIS_RADIUS, _PUPIL_RADIUS))
 
 
-def eye_data(model, neutral: np.ndarray, names: list) -> dict | None:
+def eye_data(model, neutral: np.ndarray, names: list,
+             shapes: np.ndarray | None = None) -> dict | None:
     """What the page needs to draw and turn the eyeballs; None for a model without landmarks.
 
     Each eyeball is :func:`facetransfer.track.gaze.eye_model`'s: a sphere about the eye's centre
@@ -151,7 +153,12 @@ def eye_data(model, neutral: np.ndarray, names: list) -> dict | None:
     identity its dials show. Expressions leave them where they are (a blink moves the lids, not
     the eyeball). The mesh's lids do not quite meet at ``eyeBlink`` 1, so the page shades each
     eyeball by its lid gap (:data:`facetransfer.puppet_face.LID_SHADE`, as the puppet does): a
-    closing lid darkens the eye, a closed one hides it.
+    closing lid darkens the eye, a closed one hides it. Closed: at and under the face's shut
+    gap, :func:`facetransfer.puppet_face.shut_gaps_at_blink` of its face at both eyeBlinks 1
+    (the puppet's and the exported glb's and USD's rule), which the page computes for the
+    identity its dials show: the neutral and dials it draws plus ``blink``, both eyeBlink
+    shapes' offsets at the lid and corner vertices, in float64 (the page's morph targets are
+    int16: 1e-5 eye widths off on the test model).
 
     The turn is :func:`facetransfer.track.gaze.activation_gaze`, which is linear in the
     activations: ``gaze`` lists, per expression slider that turns an eye, ``[slider, eye, yaw,
@@ -166,13 +173,17 @@ def eye_data(model, neutral: np.ndarray, names: list) -> dict | None:
         The page's neutral face.
     names : list of str
         The page's expression sliders: only ARKit's 52 turn the eyes.
+    shapes : (len(names), n_vertices, 3) float, optional
+        The sliders' offsets (the eyeBlinks' give ``blink``).
 
     Returns
     -------
     dict or None
         ``corners`` (2, 2) vertex ids, ``offset`` (2, 3), ``ratio`` (2,), ``gaze`` (G, 4),
         ``lids`` (2, 2, 2) vertex ids (:data:`facetransfer.puppet_face.LID_PAIRS`) and
-        ``lid_shade`` (:data:`facetransfer.puppet_face.LID_SHADE`), ``iris_angle`` and
+        ``lid_shade`` (:data:`facetransfer.puppet_face.LID_SHADE`), ``shut_margin``
+        (:data:`facetransfer.puppet_face.SHUT_MARGIN`), ``blink`` (vertex id -> (3,), or None
+        without ARKit's eyeBlinks: the shut gap is then ``lid_shade[0]``), ``iris_angle`` and
         ``pupil_angle`` (degrees; the colours are :func:`page_palette`'s); eyes in
         :data:`facetransfer.track.gaze.EYES` order (the subject's right, then left). None also
         where an eye's corners coincide (a degenerate face).
@@ -197,7 +208,15 @@ def eye_data(model, neutral: np.ndarray, names: list) -> dict | None:
         for j, e in zip(*np.nonzero(np.abs(unit).sum(axis=2))):
             gaze.append([int(j), int(e), float(unit[j, e, 0]), float(unit[j, e, 1])])
     lids = [[[int(lm[u]), int(lm[lo])] for u, lo in pairs] for pairs in LID_PAIRS]
+    blink = None
+    if shapes is not None and list(names) == list(ARKIT_NAMES):
+        j = [ARKIT_NAMES.index(n) for n in ("eyeBlinkLeft", "eyeBlinkRight")]
+        ids = sorted({k for pairs in lids for pair in pairs for k in pair} |
+                     {k for c in corners for k in c})
+        moved = np.asarray(shapes, np.float64)[j][:, ids].sum(axis=0)
+        blink = {str(k): [float(x) for x in d] for k, d in zip(ids, moved)}
     return {"corners": [list(c) for c in corners], "lids": lids, "lid_shade": list(LID_SHADE),
+            "shut_margin": SHUT_MARGIN, "blink": blink,
             "offset": ((eyes.centre - mid) / width[:, None]).tolist(),
             "ratio": (eyes.radius / width).tolist(), "gaze": gaze,
             "iris_angle": IRIS_ANGLE, "pupil_angle": PUPIL_ANGLE}
@@ -380,7 +399,7 @@ def viewer_page(model, *, track=None, title: str = "facetransfer") -> str:
     identity = (track.weights_at(0)[model.mode_names[k]] if track is not None
                 else model.weight_mean(k))
     neutral, shapes, names, shape_title, dial_off = view_rig(model, identity, dials)
-    eyes = eye_data(model, neutral, names)
+    eyes = eye_data(model, neutral, names, shapes)
     loops = cavity_loops(model)
     faces, neutral, shapes, dial_off = _closed(loops, model.faces, neutral, shapes, dial_off)
     dial_names = list(dials.names) if dials is not None else []
