@@ -180,9 +180,9 @@ def _row(arch, front: float, top: float, bottom: float, shade: float) -> TeethRo
                     np.repeat(colours, 2, axis=0).astype(np.float32))
 
 
-def teeth_of(model, neutral: np.ndarray, deltas, names=None) -> Teeth | None:
-    """The teeth of the face ``neutral`` (n, 3) with the shapes ``deltas`` (each (n, 3),
-    ``names`` order: :data:`facetransfer.arkit.ARKIT_NAMES` by default), in their units.
+def teeth_of(model, neutral: np.ndarray, deltas) -> Teeth | None:
+    """The teeth of the face ``neutral`` (n, 3) with the shapes ``deltas`` (each (n, 3), in
+    :data:`facetransfer.arkit.ARKIT_NAMES` order), in their units.
 
     Returns
     -------
@@ -206,7 +206,7 @@ def teeth_of(model, neutral: np.ndarray, deltas, names=None) -> Teeth | None:
                  arch.lower_edge + LOWER_SHOW * eye, LOWER_SHADE)
     chin = chin_vertices(model, V, arch)
     fits = {name: rigid_fit(V[chin], V[chin] + np.asarray(d, np.float64)[chin])
-            for name, d in zip(ARKIT_NAMES if names is None else names, deltas)
+            for name, d in zip(ARKIT_NAMES, deltas)
             if name in JAW_SHAPES and chin.size >= 3}
     return Teeth(upper, lower, fits)
 
