@@ -384,7 +384,7 @@ def _track_run(shape: Shape, det: ClipDetections, order: list, seed: FrameState 
         st = fit_frame(shape, tg, eye_distance(det.points[i]), None if prev is None else prev.pose,
                         shape.x0 if prev is None else prev.x,
                         None if prev is None or prev_i is None else prev.x, int(opt.iterations),
-                        iris_of(weights, i), weights.anchor(i), weights.ridge(i))
+                        iris_of(weights, i), weights.anchor(i), weights.extra_ridge(i))
         states[i] = st
         prev, prev_i = st, i
         done += 1
@@ -602,7 +602,7 @@ def _track_passes(run: "_FitRun", det: ClipDetections, weights: PointWeights,
     first pass's funnel sets the score line's slope.
     """
     refine = opt.scores > 0 and det.scores is not None and run.shape.arkit
-    final = replace(weights, ridges=funnel_ridges(run.shape, det.points, opt))
+    final = replace(weights, extra_ridges=funnel_ridges(run.shape, det.points, opt))
     if run.lines is None:
         _track_both(run, det, weights if refine else final, opt, prog, maybe_save)
         if not refine:
