@@ -222,8 +222,8 @@ class TransferPlan:
                        progress: Callable[[int], None] | None = None, **kwargs) -> MouthFunction:
         """The mouth texture function lifted from :attr:`texture_frames`
         (:func:`facetransfer.texture.face.mouth_texture_function`; ``kwargs``: ``tex_size``,
-        ``step``, ``max_frames``, ``k``, ``on_frames``). ``tex_size`` defaults to ``"auto"``: the mouth's
-        square of the UV layout at the face's size in the frames
+        ``step``, ``max_frames``, ``k``, ``on_frames``). ``tex_size`` defaults to ``"auto"``:
+        the mouth's square of the UV layout at the face's size in the frames
         (:class:`~facetransfer.texture.face.MouthLayout`), so a 1080p or 4K face's mouth is
         drawn as sharp as the footage (§6)."""
         kwargs.setdefault("tex_size", "auto")
