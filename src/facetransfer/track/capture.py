@@ -20,7 +20,9 @@ frame and the drifting flow by measurements taken on every frame:
    (:mod:`facetransfer.track.gaze`): the model has no eyeballs.
 4. **A second pass** (:mod:`facetransfer.track.scores`), for an ARKit model: MediaPipe's own
    blendshape scores of the jaw, the lips' funnel and pucker and the blinks, mapped per clip
-   onto the first pass's activations, pull every frame's activations in a second run.
+   onto the first pass's activations, pull every frame's activations in a second run. In the
+   pass whose activations are kept (the only one without scores), mouthFunnel is held toward 0
+   where the detected lips are shut (:func:`funnel_ridges`, ``CaptureOptions.funnel_gate``).
 5. Frames without a detection are lost (the nearest tracked state is held); the face may appear
    late: tracking starts where it is.
 6. The track's pose has the head's pitch the detector shows too small restored
