@@ -254,8 +254,8 @@ def _teeth(stage, skel, rig, model, pxr) -> None:
         mesh.CreateDoubleSidedAttr(True)
         mesh.CreateDisplayColorPrimvar(UsdGeom.Tokens.vertex).Set(
             Vt.Vec3fArray.FromNumpy(row.colours))
-        _bind(stage, skel, mesh, pxr, 0, [d for d, _ in row_moves(row, fits, fits)] or None,
-              list(fits))
+        jaw = list(fits)                          # the jaw shapes it follows: none, upper row
+        _bind(stage, skel, mesh, pxr, 0, [d for d, _ in row_moves(row, fits, jaw)] or None, jaw)
 
 
 def _joints(eyes) -> list[str]:
