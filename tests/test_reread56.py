@@ -1,4 +1,4 @@
-"""reread56: two of the fifty-sixth session's promises that its own tests left untested.
+"""reread56: three of the fifty-sixth session's promises that its own tests left untested.
 
 - ``mouth_texture_function(tex_size="auto", on_frames=...)`` announces the frames it lifts
   *after* the memory bound trimmed them (review56b's bar: a 4K mouth's 83 of 120); its test
@@ -6,6 +6,7 @@
 - ``transfer --performance P --save-track NEW``: the new performance is marked ``made_by``
   even where ``P`` is not (a clip's own track given as the performance); savetrack56's tests
   only saved a recombined transfer's, or rendered a file already marked.
+- each of the five clip track options refuses a marked file (the CLI tests give four).
 """
 
 from __future__ import annotations
@@ -52,3 +53,28 @@ def test_a_performance_without_the_mark_is_saved_with_it(clips, quick_model_path
     assert Track.load(clips["target_track"]).made_by == ""
     with np.load(clips["target_track"]) as z:
         assert "made_by" not in z.files
+
+
+def test_every_clip_track_option_refuses_a_marked_file(quick_track, tmp_path):
+    """``check_given_tracks`` for each of the five clip track options (savetrack56's CLI tests
+    cover four, not ``--viseme-track``), and a mark other than a transfer's is named as such."""
+    import dataclasses
+    import re
+
+    import pytest
+
+    from facetransfer.errors import RewriteError
+    from facetransfer.transfer_plan import TransferSources, check_given_tracks
+
+    for made, words in (("transfer", "a transfer's saved performance"),
+                        ("an edit", "a performance made by an edit")):
+        perf = tmp_path / f"{made[:2]}.npz"
+        dataclasses.replace(quick_track, made_by=made).save(perf)
+        for kind, flag in (("target", "--target-track"), ("expression", "--source-track"),
+                           ("viseme", "--viseme-track"), ("identity", "--identity-track"),
+                           ("pose", "--pose-track")):
+            kw = ({"target_track": perf} if kind == "target"
+                  else {f"{kind}_from": "s.mp4", f"{kind}_track": perf})
+            with pytest.raises(RewriteError, match="^" + re.escape(f"{flag} {perf} is {words}")):
+                check_given_tracks(TransferSources.of("t.mp4", **kw))
+        check_given_tracks(TransferSources.of("t.mp4", target_track=tmp_path / "none.npz"))
