@@ -222,11 +222,9 @@ def _track_lines(f: dict) -> list[str]:
 def _made_by_line(made_by: str) -> str:
     """What a track file marked as a performance (:attr:`facetransfer.track.Track.made_by`)
     is for: ``--performance``, ``export``, ``view``, ``puppet``; not a clip's own track."""
-    from .track.result import MADE_BY_TRANSFER
+    from .track.result import made_by_words
 
-    what = ("a transfer's saved performance (--save-track: the source's expressions on the "
-            "target's head)") if made_by == MADE_BY_TRANSFER else f"a performance made by {made_by}"
-    return (f"  {what}: give it as --performance, or to export, view, puppet; not a track of "
+    return (f"  {made_by_words(made_by)}: give it as --performance, or to export, view, puppet; not a track of "
             "the clip it was made from (refused as --target-track)")
 
 

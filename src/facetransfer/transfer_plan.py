@@ -154,13 +154,12 @@ def performance_given(path, name: str, kind: str, video) -> str | None:
     of clip ``video`` (``"target"``, ``"expression"``...), where it is a performance a
     transfer made (:func:`check_given_tracks`); None for a clip's track (a file without the
     mark, :func:`facetransfer.track.result.made_by_of`)."""
-    from .track.result import MADE_BY_TRANSFER, made_by_of
+    from .track.result import made_by_of, made_by_words
 
     made = made_by_of(path)
     if not made:
         return None
-    what = ("a transfer's saved performance (--save-track: the expressions it rendered on the "
-            "target's head)") if made == MADE_BY_TRANSFER else f"a performance made by {made}"
+    what = made_by_words(made)
     whose = "target" if kind == "target" else f"{kind} source"
     perf = "--performance" if name.startswith("--") else "performance"
     return (f"{name} {path} is {what}, not a track of the {whose} {video}: give the clip's own "
@@ -222,8 +221,8 @@ class TransferPlan:
                        progress: Callable[[int], None] | None = None, **kwargs) -> MouthFunction:
         """The mouth texture function lifted from :attr:`texture_frames`
         (:func:`facetransfer.texture.face.mouth_texture_function`; ``kwargs``: ``tex_size``,
-        ``step``, ``max_frames``, ``k``, ``on_frames``). ``tex_size`` defaults to ``"auto"``: the mouth's
-        square of the UV layout at the face's size in the frames
+        ``step``, ``max_frames``, ``k``, ``on_frames``). ``tex_size`` defaults to ``"auto"``:
+        the mouth's square of the UV layout at the face's size in the frames
         (:class:`~facetransfer.texture.face.MouthLayout`), so a 1080p or 4K face's mouth is
         drawn as sharp as the footage (§6)."""
         kwargs.setdefault("tex_size", "auto")

@@ -292,20 +292,18 @@ def face_arg(args):
     return read_face(args.face)
 
 
-def face_or_weights(model, args, face, *, model_arg: str = "--model") -> dict[str, np.ndarray]:
+def face_or_weights(model, args, face) -> dict[str, np.ndarray]:
     """The weights of ``face`` (a face saved by the dial editor, :func:`face_arg`), else of
-    ``--weights`` / ``--like`` (:func:`synth_weights`). ``model_arg``: how the command takes
-    its model, named by a refusal of a face dialled on another (``"MODEL"``: a positional
-    argument, :func:`positional_hint`)."""
+    ``--weights`` / ``--like`` (:func:`synth_weights`), for ``model synth`` and ``render``:
+    a refusal of a face dialled on another model names their positional MODEL, not
+    ``--model`` (:func:`positional_hint`)."""
     if face is not None:
         from ..face_file import FaceFileError, face_weights
 
         try:
             return face_weights(face, model)
         except FaceFileError as err:
-            if model_arg == "--model":
-                raise
-            raise FaceFileError(positional_hint(str(err), model_arg)) from None
+            raise FaceFileError(positional_hint(str(err), "MODEL")) from None
     return synth_weights(model, parse_weights(args.weights) if args.weights else None,
                          parse_like(args.like) if args.like else None)
 
@@ -334,7 +332,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
     check_output_path(out, overwrite=args.overwrite, inputs=[args.model, args.face])
     face = face_arg(args)
     m = resolve_model(args.model)
-    v = m.synthesize(face_or_weights(m, args, face, model_arg="MODEL"))
+    v = m.synthesize(face_or_weights(m, args, face))
     write_mesh(out, v, m.faces, uvs=m.uvs if out.suffix.lower() == ".obj" else None,
                overwrite=args.overwrite)
     print(f"wrote {out} ({m.n_vertices} vertices)" + _unturned(face))

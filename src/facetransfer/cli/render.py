@@ -124,7 +124,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     pose = _face_pose(face, parse_pose(args.pose))
     background = parse_colour(args.background)   # before the model, which may be built first
     model = resolve_model(args.model)
-    weights = face_or_weights(model, args, face, model_arg="MODEL")
+    weights = face_or_weights(model, args, face)
     res = preview_face(model, weights, size=size, yaw_deg=pose.get("yaw", 0.0),
                        pitch_deg=pose.get("pitch", 0.0), roll_deg=pose.get("roll", 0.0),
                        scale=pose.get("scale", 1.0), background=background)

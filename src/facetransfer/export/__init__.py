@@ -12,10 +12,11 @@ usd         usd           UsdSkel blend shapes + SkelAnimation (needs ``usd-core
 json        mpjson        per-frame scores in MediaPipe Face Landmarker's layout
 ==========  ============  ===========================================================
 
-The glb's eyeballs, behind the face's eye holes and turned by its gaze, are
-:mod:`facetransfer.export.gltf_eyes`; the glb's and the USD's teeth, on the dental arches behind
-the lips (the lower row moved by the jaw), :mod:`facetransfer.export.teeth`. What every format shares (the model check, the activations, the head pose) is
-:mod:`facetransfer.export.common`. The browser dial editor is
+The glb's and the USD's eyeballs, behind the face's eye holes, turned by its gaze and hidden
+while its lids are shut, and the dark eye sockets behind the holes, are
+:mod:`facetransfer.export.gltf_eyes`; their teeth, on the dental arches behind the lips (the
+lower row moved by the jaw), :mod:`facetransfer.export.teeth`. What every format shares (the
+model check, the activations, the head pose) is :mod:`facetransfer.export.common`. The browser dial editor is
 :mod:`facetransfer.export.viewer`; a neutral pose for the curves (Live Link Face's calibration)
 is :mod:`facetransfer.export.neutral`.
 """

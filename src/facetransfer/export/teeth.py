@@ -145,8 +145,9 @@ def chin_vertices(model, V: np.ndarray, arch) -> np.ndarray:
     return np.flatnonzero(keep)
 
 
-def _row(arch, front: float, top: float, bottom: float, shade: float) -> TeethRow:
-    """A strip on the arch whose front z is ``front``, from height ``top`` to ``bottom``,
+def _row(arch, front: float, root: float, edge: float, shade: float) -> TeethRow:
+    """A strip on the arch whose front z is ``front``, from the roots' height ``root`` to the
+    biting edge's ``edge`` (the upper row's root above its edge, the lower row's below),
     :data:`REACH` of the mouth's half-width each side, in the palette's teeth shaded as a
     rewrite shades them, times ``shade``."""
     from ..io.exr import srgb_decode
@@ -164,7 +165,7 @@ def _row(arch, front: float, top: float, bottom: float, shade: float) -> TeethRo
     k = len(u)
     P = np.zeros((k, 2, 3))
     P[:, :, 0], P[:, :, 2] = x[:, None], z[:, None]
-    P[:, 0, 1], P[:, 1, 1] = top, bottom
+    P[:, 0, 1], P[:, 1, 1] = root, edge
     N = np.stack([2.0 * ARCH_CURVE * u / arch.eye, np.zeros(k), np.ones(k)], axis=1)
     N /= np.linalg.norm(N, axis=1, keepdims=True)
     i = 2 * np.arange(k - 1)
@@ -180,9 +181,9 @@ def _row(arch, front: float, top: float, bottom: float, shade: float) -> TeethRo
                     np.repeat(colours, 2, axis=0).astype(np.float32))
 
 
-def teeth_of(model, neutral: np.ndarray, deltas, names=None) -> Teeth | None:
-    """The teeth of the face ``neutral`` (n, 3) with the shapes ``deltas`` (each (n, 3),
-    ``names`` order: :data:`facetransfer.arkit.ARKIT_NAMES` by default), in their units.
+def teeth_of(model, neutral: np.ndarray, deltas) -> Teeth | None:
+    """The teeth of the face ``neutral`` (n, 3) with the shapes ``deltas`` (each (n, 3), in
+    :data:`facetransfer.arkit.ARKIT_NAMES` order), in their units.
 
     Returns
     -------
@@ -206,7 +207,7 @@ def teeth_of(model, neutral: np.ndarray, deltas, names=None) -> Teeth | None:
                  arch.lower_edge + LOWER_SHOW * eye, LOWER_SHADE)
     chin = chin_vertices(model, V, arch)
     fits = {name: rigid_fit(V[chin], V[chin] + np.asarray(d, np.float64)[chin])
-            for name, d in zip(ARKIT_NAMES if names is None else names, deltas)
+            for name, d in zip(ARKIT_NAMES, deltas)
             if name in JAW_SHAPES and chin.size >= 3}
     return Teeth(upper, lower, fits)
 

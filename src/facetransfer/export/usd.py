@@ -8,11 +8,15 @@ Layout (``usd-core``, the optional extra ``facetransfer[usd]``)::
                           centres); skel:animationSource -> Anim
         /Face/Skel/Anim   SkelAnimation: blendShapes (52 ARKit names), blendShapeWeights,
                           translations / rotations / scales of the joints: one time sample per
-                          frame (the eyes turned by the gaze, :mod:`.gltf_eyes`)
+                          frame (the eyes turned by the gaze, :mod:`.gltf_eyes`; an eye
+                          joint's scale SHUT_SCALE while its lids are shut,
+                          :func:`.gltf_eyes.eyes_shown`, else 1)
       /Face/Mesh          Mesh (neutral face and its extent, primvars:st), SkelBindingAPI:
                           skel:skeleton, skel:blendShapes + skel:blendShapeTargets, every
                           vertex on "head"
         /Face/Mesh/<name> BlendShape: offsets f_j - f_0 (pointIndices when sparse)
+      /Face/eyeSockets    Mesh, the eye sockets (:func:`.gltf_eyes.socket_cones`) on "head",
+                          with its own 52 BlendShape prims (the lids' deltas; none without eyes)
       /Face/eyeRight      Mesh, the eyeball (displayColor), every vertex on "head/eyeRight"
       /Face/eyeLeft       likewise on "head/eyeLeft" (no eyes for a model without landmarks)
       /Face/mouthInside   Mesh, the mouth's inside (:func:`.gltf.mouth_cone`) on "head", with
@@ -20,9 +24,6 @@ Layout (``usd-core``, the optional extra ``facetransfer[usd]``)::
       /Face/teethUpper    Mesh, the upper teeth (:mod:`.teeth`, displayColor) on "head", rigid
       /Face/teethLower    Mesh, the lower teeth on "head", with a BlendShape prim per jaw shape
                           (jawOpen, jawLeft, jawRight, jawForward: the jaw's rigid motion)
-      /Face/eyeSockets    Mesh, the eye sockets (:func:`.gltf_eyes.socket_cones`) likewise
-                          (the lids' deltas); an eye joint's scale is SHUT_SCALE while its
-                          lids are shut (:func:`.gltf_eyes.eyes_shown`), else 1
 
 Time codes are frame numbers (``timeCodesPerSecond`` = the clip's fps): from 0, or, for a
 track of an image sequence numbered from N (a VFX plate's 1001), from N, so that the
@@ -253,8 +254,8 @@ def _teeth(stage, skel, rig, model, pxr) -> None:
         mesh.CreateDoubleSidedAttr(True)
         mesh.CreateDisplayColorPrimvar(UsdGeom.Tokens.vertex).Set(
             Vt.Vec3fArray.FromNumpy(row.colours))
-        _bind(stage, skel, mesh, pxr, 0, [d for d, _ in row_moves(row, fits, fits)] or None,
-              list(fits))
+        jaw = list(fits)                          # the jaw shapes it follows: none, upper row
+        _bind(stage, skel, mesh, pxr, 0, [d for d, _ in row_moves(row, fits, jaw)] or None, jaw)
 
 
 def _joints(eyes) -> list[str]:

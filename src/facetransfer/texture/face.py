@@ -7,7 +7,9 @@ the performance-driven mouth texture.
 * :func:`constant_face_texture` / :func:`merged_face_texture`: "the face texture from the
   target video (constant throughout the sequence)";
 * :class:`MouthFunction` / :func:`mouth_texture_function`: the performance-driven texture
-  function of §6 ("the weighted sum of nearest neighbors" in attribute space) for the mouth;
+  function of §6 ("the weighted sum of nearest neighbors" in attribute space) for the mouth,
+  lifted into the whole UV atlas at a given size or, ``tex_size="auto"``, into the mouth's
+  square of it at the face's size in the frames (:class:`MouthLayout`, :func:`mouth_layout`);
   :func:`resolve_mouth_mode` / :func:`default_mouth_mode` choose between it and the source's
   frame.
 """

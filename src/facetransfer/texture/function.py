@@ -57,9 +57,9 @@ class TextureFunction:
 
     Notes
     -----
-    All lifted textures are held in memory as float32: ``F * T * T * 16`` bytes (200 frames at
-    T = 256 take 210 MB), as float16 ``F * T * T * 8``; lift every few frames or use a smaller
-    ``T`` for long clips. Eq. (T1) is evaluated in float64 whatever the storage.
+    All lifted textures are held in memory, as float32 ``F * T * T * 16`` bytes (200 frames at
+    T = 256 take 210 MB), or as float16 ``F * T * T * 8`` where given so; lift every few frames
+    or use a smaller ``T`` for long clips. Eq. (T1) is evaluated in float64 whatever the storage.
 
     References
     ----------

@@ -20,7 +20,9 @@ frame and the drifting flow by measurements taken on every frame:
    (:mod:`facetransfer.track.gaze`): the model has no eyeballs.
 4. **A second pass** (:mod:`facetransfer.track.scores`), for an ARKit model: MediaPipe's own
    blendshape scores of the jaw, the lips' funnel and pucker and the blinks, mapped per clip
-   onto the first pass's activations, pull every frame's activations in a second run.
+   onto the first pass's activations, pull every frame's activations in a second run. In the
+   pass whose activations are kept (the only one without scores), mouthFunnel is held toward 0
+   where the detected lips are shut (:func:`funnel_ridges`, ``CaptureOptions.funnel_gate``).
 5. Frames without a detection are lost (the nearest tracked state is held); the face may appear
    late: tracking starts where it is.
 6. The track's pose has the head's pitch the detector shows too small restored
@@ -384,7 +386,7 @@ def _track_run(shape: Shape, det: ClipDetections, order: list, seed: FrameState 
         st = fit_frame(shape, tg, eye_distance(det.points[i]), None if prev is None else prev.pose,
                         shape.x0 if prev is None else prev.x,
                         None if prev is None or prev_i is None else prev.x, int(opt.iterations),
-                        iris_of(weights, i), weights.anchor(i), weights.ridge(i))
+                        iris_of(weights, i), weights.anchor(i), weights.extra_ridge(i))
         states[i] = st
         prev, prev_i = st, i
         done += 1
@@ -602,7 +604,7 @@ def _track_passes(run: "_FitRun", det: ClipDetections, weights: PointWeights,
     first pass's funnel sets the score line's slope.
     """
     refine = opt.scores > 0 and det.scores is not None and run.shape.arkit
-    final = replace(weights, ridges=funnel_ridges(run.shape, det.points, opt))
+    final = replace(weights, extra_ridges=funnel_ridges(run.shape, det.points, opt))
     if run.lines is None:
         _track_both(run, det, weights if refine else final, opt, prog, maybe_save)
         if not refine:

@@ -77,11 +77,11 @@ def gaze_fixed(shape: Shape, pose: Pose, x: np.ndarray, gaze: tuple,
 
 def fit_frame(shape: Shape, targets: Targets, iod: float, pose: Pose | None, x: np.ndarray,
                prev: np.ndarray | None, iterations: int, gaze: tuple | None = None,
-               anchor: tuple | None = None, ridge: np.ndarray | None = None) -> FrameState:
+               anchor: tuple | None = None, extra_ridge: np.ndarray | None = None) -> FrameState:
     """Alternate pose (Gauss-Newton, Eq. (7)) and expression (bounded or prior-weighted LS,
     Eq. (9)) for one frame (``targets``: the detections first); with ``gaze`` (:func:`iris_of`;
     ARKit models) the eyeLook* activations follow the iris at each pose; ``anchor`` and
-    ``ridge`` (K,) as in :meth:`Shape.solve`."""
+    ``extra_ridge`` (K,) as in :meth:`Shape.solve`."""
     p, w = targets.p[0], targets.w[0]
     base = shape
     if pose is None:
@@ -95,7 +95,7 @@ def fit_frame(shape: Shape, targets: Targets, iod: float, pose: Pose | None, x: 
         pose = pose_gauss_newton(X, targets, pose, iod, iterations=1)
         shape = base.at_view(sin_yaw(pose))
         held, after = (None, None) if gaze is None else gaze_fixed(shape, pose, x, gaze, X)
-        x = shape.solve(pose, targets, iod, x, prev, held, anchor, ridge)
+        x = shape.solve(pose, targets, iod, x, prev, held, anchor, extra_ridge)
         X = shape.points(x)
     if after is not None:
         x = np.where(np.isfinite(after), after, x)
@@ -114,7 +114,7 @@ class PointWeights:
     closed: np.ndarray | None = None   # (F, 2) eyes with closed lids (vertical gaze free)
     anchors: np.ndarray | None = None  # (F, K) mapped detector scores (NaN: none)
     anchor_weights: np.ndarray | None = None  # (K,) their terms' factors (ScoreLine.weight)
-    ridges: np.ndarray | None = None   # (F, K) extra ridge toward 0 per frame (lips_gate)
+    extra_ridges: np.ndarray | None = None  # (F, K) added to the prior's ridge (funnel_ridges)
 
     def flow_nominal(self, flow: float) -> np.ndarray:
         """Summed weights (P,) of the detection and flow terms with every point known (the
@@ -131,9 +131,9 @@ class PointWeights:
         w = np.ones(self.anchors.shape[1]) if self.anchor_weights is None else self.anchor_weights
         return self.anchors[i], w
 
-    def ridge(self, i: int) -> np.ndarray | None:
+    def extra_ridge(self, i: int) -> np.ndarray | None:
         """Frame ``i``'s extra ridge on the activations toward 0 (K,), or None."""
-        return None if self.ridges is None else self.ridges[i]
+        return None if self.extra_ridges is None else self.extra_ridges[i]
 
 
 def detection_targets(det: ClipDetections, i: int, pw: PointWeights) -> tuple[np.ndarray, np.ndarray]:

@@ -112,7 +112,7 @@ class Shape:
             self.D = rig.deltas[self.used]                                     # (K, P, 3)
             self.size = len(self.used)
             self.x0 = np.zeros(self.size)
-            self.ridge = activation_prior_scale()[self.used]                   # (K,)
+            self.ridge = activation_prior_scale()[self.used]   # (K,) the prior's, per shape
             self.fast = np.array([n.startswith(EYELID) for n in ARKIT_NAMES])[self.used]
             self.u0, D = activation_basis(self.model)
             self.Du = D[self.used]                                             # (K, r)
@@ -221,21 +221,23 @@ class Shape:
 
     def solve(self, pose: Pose, targets: Targets, iod: float, x: np.ndarray,
               prev: np.ndarray | None, fixed: np.ndarray | None = None,
-              anchor: tuple | None = None, ridge: np.ndarray | None = None) -> np.ndarray:
+              anchor: tuple | None = None, extra_ridge: np.ndarray | None = None) -> np.ndarray:
         """The per-frame parameters best explaining ``targets`` at ``pose`` (ARKit: the
         activations where ``fixed`` (K,) is finite held at its values, and, with ``anchor`` =
         ``(a, f)`` (K,) each, pulled with weight ``opt.scores · f`` toward ``a`` where it is
         finite: the mapped detector scores of :mod:`facetransfer.track.scores` and their lines'
-        weights; ``ridge`` (K,), an extra ridge toward 0 (the funnel's where the lips are shut:
-        :func:`~facetransfer.track.capture.funnel_ridges`); with ``opt.lip_contact``, where the
-        box solution crosses the lips, solved again with the inner-lip gaps held:
+        weights; ``extra_ridge`` (K,) added to the prior's ridge toward 0 (the funnel's where
+        the lips are shut: :func:`~facetransfer.track.capture.funnel_ridges`); with
+        ``opt.lip_contact``, where the box solution crosses the lips, solved again with the
+        inner-lip gaps held:
         :mod:`facetransfer.track.lip_contact`)."""
         lam_p, lam_t = self.opt.expression_prior, (self.opt.temporal if prev is not None else 0.0)
         if self.arkit:
             lam_t = (np.where(self.fast, self.opt.temporal, self.opt.slow_temporal)
                      if prev is not None else 0.0)                           # (K,)
-            lam = lam_p * self.ridge + lam_t + 1e-9
-            ridge = lam if ridge is None else lam + ridge
+            ridge = lam_p * self.ridge + lam_t + 1e-9     # (K,): the prior's and the temporal
+            if extra_ridge is not None:
+                ridge = ridge + extra_ridge
             rhs = lam_t * prev if prev is not None else np.zeros(self.size)
             if anchor is not None:
                 a, f = anchor

@@ -50,7 +50,7 @@ from ..errors import TrackError
 from ..io.atomic import atomic_path
 from ..io.source_facts import SourceFacts
 
-__all__ = ["Track", "TRACK_FORMAT_VERSION", "MADE_BY_TRANSFER", "made_by_of"]
+__all__ = ["Track", "TRACK_FORMAT_VERSION", "MADE_BY_TRANSFER", "made_by_of", "made_by_words"]
 
 #: Version of the track file layout written by :meth:`Track.save`.
 TRACK_FORMAT_VERSION = 1
@@ -481,6 +481,14 @@ class Track:
             if str(p) in str(exc):   # said of the file already: not twice
                 raise TrackError(str(exc)) from None
             raise TrackError(f"track file {p} is invalid: {exc}") from None
+
+
+def made_by_words(made_by: str) -> str:
+    """What a message calls a track file marked ``made_by`` (:attr:`Track.made_by`, not "")."""
+    if made_by == MADE_BY_TRANSFER:
+        return ("a transfer's saved performance (--save-track: the source's expressions on the "
+                "target's head)")
+    return f"a performance made by {made_by}"
 
 
 def made_by_of(path: str | os.PathLike) -> str:
