@@ -377,13 +377,11 @@ def _check_pair_tracks(row: dict, where: str) -> None:
     (``transfer --save-track``), not the clip's track
     (:func:`facetransfer.transfer_plan.performance_given`): refused with the manifest, before
     any job runs."""
-    from ..transfer_plan import performance_given
+    from ..transfer_plan import TRACK_FLAGS, performance_given
 
-    for col, video, kind in (("target_track", "target", "target"),
-                             ("source_track", "expression_from", "expression"),
-                             ("viseme_track", "viseme_from", "viseme"),
-                             ("identity_track", "identity_from", "identity"),
-                             ("pose_track", "pose_from", "pose")):
+    for kind, flag in TRACK_FLAGS.items():   # the columns are the options' names
+        col = flag[2:].replace("-", "_")
+        video = "target" if kind == "target" else f"{kind}_from"
         line = performance_given(row[col], col, kind, row.get(video)) if row.get(col) else None
         if line:
             raise BatchError(f"{where}: {line}")

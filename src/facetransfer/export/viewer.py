@@ -315,11 +315,12 @@ def loop_cones(neutral: np.ndarray, deltas, loops: list):
     D = np.asarray(deltas)
     points, fans, moved = [], [], []
     for lp, depth in loops:
-        rim, base = np.asarray(neutral, np.float64)[lp], sum(len(p) for p in points)
-        fan, apex, d = cavity_cone(rim, np.arange(len(lp)), depth, len(lp), D[:, lp])
+        rim, base, on_rim = (np.asarray(neutral, np.float64)[lp], sum(len(p) for p in points),
+                             D[:, lp])
+        fan, apex, d = cavity_cone(rim, np.arange(len(lp)), depth, len(lp), on_rim)
         points += [rim, apex[None]]
         fans.append(fan + base)
-        moved.append(np.concatenate([D[:, lp], d[:, None]], axis=1))
+        moved.append(np.concatenate([on_rim, d[:, None]], axis=1))
     return (np.concatenate(points).astype(np.float32), np.concatenate(fans),
             list(np.concatenate(moved, axis=1).astype(np.float32)))
 
