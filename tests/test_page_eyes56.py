@@ -194,3 +194,33 @@ def test_a_shut_gap_at_the_top_of_the_shade_steps_the_light():
     assert np.all(lid_light(narrower) > 0.9)                        # the fixed rule: lit
     crossed = P * [1, -1, 1]
     np.testing.assert_array_equal(shut_gaps_at_blink(crossed), [LID_SHADE[0]] * 2)
+
+
+def test_a_model_without_eyeblinks_keeps_the_fixed_shut_gap(data_dir):
+    """review56c: an ARKit model lacking the eyeBlink shapes (a manifest of some ARKit names) has
+    zero eyeBlink rows, so "its lids at eyeBlink 1" were its open neutral's (0.25 eye widths):
+    the shut gap went to LID_SHADE[1], 0.18, and the puppet, the glb/USD and the page hid the
+    eyes of a look down (gap 0.154, lit 0.83 by the fixed rule). Now it keeps 0.08."""
+    from conftest import _quick_ict_dataset
+    from facetransfer.arkit import expression_rig, is_arkit_model
+    from facetransfer.export.gltf_eyes import shut_gaps
+    from facetransfer.export.viewer import eye_data
+    from facetransfer.model import build_model
+    from facetransfer.puppet_face import LID_SHADE, blink_shapes, face_shut_gaps, lid_light
+
+    exprs = {"neutral": {}, "jawOpen": {"jawOpen": 1.0},
+             "eyeLookDownLeft": {"eyeLookDown_L": 1.0}, "eyeLookDownRight": {"eyeLookDown_R": 1.0}}
+    m = build_model(_quick_ict_dataset(data_dir, 2, exprs), {"identity": 2, "expression": 4},
+                    refine=False)
+    assert is_arkit_model(m) and blink_shapes(m) is None
+    w = m.default_weights()
+    np.testing.assert_array_equal(face_shut_gaps(m, w), [LID_SHADE[0]] * 2)
+    rig = expression_rig(m, w)
+    np.testing.assert_array_equal(shut_gaps(m, rig), [LID_SHADE[0]] * 2)
+    assert eye_data(m, rig.neutral, list(ARKIT_NAMES), rig.deltas)["blink"] is None
+    a = np.zeros((1, 52))
+    a[0, [ARKIT_NAMES.index("eyeLookDownLeft"), ARKIT_NAMES.index("eyeLookDownRight")]] = 1.0
+    P = m.synthesize({**w, "expression": activations_to_weights(m, a)[0]})[_landmark_ids(m)]
+    light = lid_light(P, face_shut_gaps(m, w))
+    np.testing.assert_array_equal(light, lid_light(P))
+    assert np.all(light > 0.5)

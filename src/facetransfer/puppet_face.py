@@ -59,7 +59,7 @@ __all__ = ["PALETTE", "SKIN", "SCLERA", "IRIS", "LIMBUS", "PUPIL", "CAVITY", "TE
            "CAVITY_BACK", "IRIS_RIM", "IRIS_RADIUS", "PUPIL_RADIUS",
            "TEETH_SHOW", "SHUT", "SHUT_LINE", "LID_PAIRS", "LID_SHADE", "SHUT_MARGIN",
            "PuppetFace", "puppet_face", "arkit_activations", "track_gaze", "lid_gaps",
-           "shut_gaps_at_blink", "face_shut_gaps", "lid_light", "paint_face",
+           "blink_shapes", "shut_gaps_at_blink", "face_shut_gaps", "lid_light", "paint_face",
            "preview_face", "draw_face"]
 
 # PALETTE (the two previews' colours, the view page's too, and the mouth's inside a rewrite
@@ -316,17 +316,34 @@ def shut_gaps_at_blink(blink68: np.ndarray) -> np.ndarray:
     return np.maximum(LID_SHADE[0], own)
 
 
+def blink_shapes(model) -> list[int] | None:
+    """The :data:`facetransfer.arkit.ARKIT_NAMES` indices of ``eyeBlinkLeft`` and
+    ``eyeBlinkRight`` (the rows of an :func:`facetransfer.arkit.expression_rig`'s deltas that
+    :func:`shut_gaps_at_blink` shuts the eyes with), or None where ``model`` has no ARKit
+    shapes or lacks either eyeBlink: its rig's row of a missing shape is zero, its "lids at
+    eyeBlink 1" the open neutral's, which would put the shut gap at ``LID_SHADE[1]`` and hide
+    the eyes whenever the lids narrow under 0.18 (a look down). The shut gap is then
+    ``LID_SHADE[0]`` (the puppet, the exported glb and USD, the ``view`` page)."""
+    from .arkit import ARKIT_NAMES, arkit_rows, is_arkit_model
+
+    if not is_arkit_model(model):
+        return None
+    j = [ARKIT_NAMES.index(n) for n in ("eyeBlinkLeft", "eyeBlinkRight")]
+    return j if bool(np.all(arkit_rows(model)[j] >= 0)) else None
+
+
 def face_shut_gaps(model, weights) -> np.ndarray:
     """``(2,)``, :func:`shut_gaps_at_blink` of ``model``'s face of ``weights`` (mode -> (r_k,):
     its identity; the expression is not read) with both ``eyeBlink`` shapes at 1 (its
     :func:`facetransfer.arkit.expression_rig` at the landmarks). ``LID_SHADE[0]`` for both eyes
-    where ``weights`` is None or the model has no landmarks or no ARKit shapes (no eyeBlink)."""
-    from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
+    where ``weights`` is None or the model has no landmarks or no eyeBlinks
+    (:func:`blink_shapes`)."""
+    from .arkit import expression_rig
 
-    if weights is None or model.landmarks is None or not is_arkit_model(model):
+    blink = blink_shapes(model)
+    if weights is None or model.landmarks is None or blink is None:
         return np.full(2, LID_SHADE[0])
     rig = expression_rig(model, weights, vertices=np.asarray(model.landmarks, np.int64))
-    blink = [ARKIT_NAMES.index(n) for n in ("eyeBlinkLeft", "eyeBlinkRight")]
     D = np.asarray(rig.deltas, np.float64)
     return shut_gaps_at_blink(np.asarray(rig.neutral, np.float64) + D[blink].sum(axis=0))
 

@@ -93,11 +93,12 @@ def shut_gaps(model, rig) -> np.ndarray:
     ``eyeBlink`` 1 plus ``SHUT_MARGIN``, at most ``LID_SHADE[1]``; lids that cross there keep
     0.08) of the rig's landmark vertices at both eyeBlinks 1: a face whose lids stop wider apart
     (the test model's identity 1: 0.098) hides its shut eyes too."""
-    from ..arkit import ARKIT_NAMES
-    from ..puppet_face import shut_gaps_at_blink
+    from ..puppet_face import LID_SHADE, blink_shapes, shut_gaps_at_blink
 
+    blink = blink_shapes(model)
+    if blink is None:  # no eyeBlink to shut the lids with: the fixed 0.08
+        return np.full(2, LID_SHADE[0])
     lm = np.asarray(model.landmarks, np.int64)
-    blink = [ARKIT_NAMES.index(n) for n in ("eyeBlinkLeft", "eyeBlinkRight")]
     D = np.asarray(rig.deltas, np.float64)
     P = np.asarray(rig.neutral, np.float64)[lm] + D[blink][:, lm].sum(axis=0)
     return shut_gaps_at_blink(P)

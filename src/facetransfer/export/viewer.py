@@ -44,7 +44,7 @@ import numpy as np
 from ..io.atomic import write_text_atomic
 from ..palette import TEETH_SPAN
 from ..puppet_face import CAVITY_BACK, IRIS_RIM, LID_PAIRS, LID_SHADE, PALETTE, TEETH_SHOW
-from ..puppet_face import SHUT_MARGIN
+from ..puppet_face import SHUT_MARGIN, blink_shapes
 from ..puppet_face import IRIS_RADIUS as _IRIS_RADIUS, PUPIL_RADIUS as _PUPIL_RADIUS
 from ..track.gaze import EYE_RADIUS as _EYE_RADIUS
 from ..track.lip_contact import LIP_PAIRS
@@ -183,8 +183,9 @@ def eye_data(model, neutral: np.ndarray, names: list,
         ``lids`` (2, 2, 2) vertex ids (:data:`facetransfer.puppet_face.LID_PAIRS`) and
         ``lid_shade`` (:data:`facetransfer.puppet_face.LID_SHADE`), ``shut_margin``
         (:data:`facetransfer.puppet_face.SHUT_MARGIN`), ``blink`` (vertex id -> (3,), or None
-        without ARKit's eyeBlinks: the shut gap is then ``lid_shade[0]``), ``iris_angle`` and
-        ``pupil_angle`` (degrees; the colours are :func:`page_palette`'s); eyes in
+        without both of ARKit's eyeBlinks, :func:`facetransfer.puppet_face.blink_shapes`:
+        the shut gap is then ``lid_shade[0]``), ``iris_angle`` and ``pupil_angle`` (degrees;
+        the colours are :func:`page_palette`'s); eyes in
         :data:`facetransfer.track.gaze.EYES` order (the subject's right, then left). None also
         where an eye's corners coincide (a degenerate face).
     """
@@ -208,9 +209,8 @@ def eye_data(model, neutral: np.ndarray, names: list,
         for j, e in zip(*np.nonzero(np.abs(unit).sum(axis=2))):
             gaze.append([int(j), int(e), float(unit[j, e, 0]), float(unit[j, e, 1])])
     lids = [[[int(lm[u]), int(lm[lo])] for u, lo in pairs] for pairs in LID_PAIRS]
-    blink = None
-    if shapes is not None and list(names) == list(ARKIT_NAMES):
-        j = [ARKIT_NAMES.index(n) for n in ("eyeBlinkLeft", "eyeBlinkRight")]
+    blink, j = None, blink_shapes(model) if list(names) == list(ARKIT_NAMES) else None
+    if shapes is not None and j is not None:  # no eyeBlinks (blink_shapes): lid_shade[0]
         ids = sorted({k for pairs in lids for pair in pairs for k in pair} |
                      {k for c in corners for k in c})
         moved = np.asarray(shapes, np.float64)[j][:, ids].sum(axis=0)
