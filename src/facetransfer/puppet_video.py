@@ -63,10 +63,10 @@ def puppet_frames(track, model, identity: np.ndarray, *, size: tuple[int, int] |
     # a solid head: the mouth gap and the eye holes closed, their fills painted as a mouth
     # cavity and eyeballs (facetransfer.puppet_face)
     topo = mesh_topology(model, lips=False)
-    # the identity drawn sets the eyes' shut gap (puppet_face.face_shut_gaps)
+    # the identity drawn sets the eyes' shut gap (puppet_face.face_shut_gaps: the expression
+    # is not read; a track has a frame at least, lost or not, its weights finite)
     face = puppet_face(model, topo, gaze=track_gaze(track),
-                       weights={**(track.weights_at(0) if track.n_frames else {}),
-                                identity_mode: wid})
+                       weights={**track.weights_at(0), identity_mode: wid})
     n_all = topo.n_closed + len(topo.eye_loops)
     colors = np.broadcast_to(np.asarray(SKIN if color is None else color, np.float64),
                              (n_all, 3))
