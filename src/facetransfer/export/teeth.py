@@ -114,8 +114,8 @@ def row_moves(row: TeethRow, fits: dict, names) -> list:
 
 def rigid_fit(P: np.ndarray, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The rotation and translation carrying the points ``P`` (m, 3) nearest to ``Q`` (m, 3)
-    in least squares (Kabsch: the SVD of their centred cross-covariance, a reflection ruled
-    out).
+    in least squares: :func:`facetransfer.correspond.procrustes.similarity_procrustes` without
+    scale (Umeyama's closed form, a reflection ruled out).
 
     Returns
     -------
@@ -124,12 +124,10 @@ def rigid_fit(P: np.ndarray, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     t : (3,) float64
         ``Q ≈ P R^T + t``.
     """
-    P, Q = np.asarray(P, np.float64), np.asarray(Q, np.float64)
-    p, q = P.mean(axis=0), Q.mean(axis=0)
-    U, _, Vt = np.linalg.svd((P - p).T @ (Q - q))
-    s = np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0
-    R = Vt.T @ np.diag([1.0, 1.0, s]) @ U.T
-    return R, q - R @ p
+    from ..correspond.procrustes import similarity_procrustes
+
+    fit = similarity_procrustes(P, Q, with_scale=False)
+    return fit.rotation, fit.translation
 
 
 def chin_vertices(model, V: np.ndarray, arch) -> np.ndarray:
